@@ -1,0 +1,83 @@
+"""Validation of user-given fields (YAML/JSON/Python), each failure one :class:`InputError`."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from .errors import InputError
+
+
+def require_mapping(value: Any, field: str) -> Mapping[str, Any]:
+    """The value must be a mapping (YAML dict)."""
+    if not isinstance(value, Mapping):
+        raise InputError(field, f"expected a mapping, got {type(value).__name__}", "write key: value")
+    return value
+
+
+def check_keys(
+    value: Mapping[str, Any], field: str, required: Iterable[str], optional: Iterable[str]
+) -> None:
+    """Every required key present, no unknown key."""
+    required = list(required)
+    allowed = set(required) | set(optional)
+    for key in required:
+        if key not in value:
+            raise InputError(f"{field}.{key}", "missing", f"add '{key}' to {field}")
+    for key in value:
+        if key not in allowed:
+            raise InputError(
+                f"{field}.{key}", "unknown field", f"allowed fields: {', '.join(sorted(allowed))}"
+            )
+
+
+def number(value: Any, field: str, *, minimum: float | None = None, positive: bool = False) -> float:
+    """A finite real number, optionally >= minimum or > 0."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise InputError(field, f"expected a number, got {value!r}", "write a finite number")
+    x = float(value)
+    if not math.isfinite(x):
+        raise InputError(field, f"{value!r} is not finite", "write a finite number")
+    if positive and x <= 0:
+        raise InputError(field, f"must be positive, got {x}", "write a number > 0")
+    if minimum is not None and x < minimum:
+        raise InputError(field, f"must be >= {minimum}, got {x}", f"write a number >= {minimum}")
+    return x
+
+
+def vector(value: Any, n: int, field: str) -> np.ndarray:
+    """A list of exactly n finite numbers."""
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if not isinstance(value, list | tuple):
+        raise InputError(field, f"expected a list of {n} numbers, got {value!r}", f"write [{n} numbers]")
+    if len(value) != n:
+        raise InputError(field, f"expected {n} numbers, got {len(value)}", f"write [{n} numbers]")
+    return np.array([number(v, f"{field}[{i}]") for i, v in enumerate(value)])
+
+
+def points2d(value: Any, field: str) -> np.ndarray:
+    """A list of [x, y] pairs."""
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if not isinstance(value, list | tuple):
+        raise InputError(field, "expected a list of [x, y] points", "write [[x, y], ...]")
+    return np.array([vector(v, 2, f"{field}[{i}]") for i, v in enumerate(value)]).reshape(-1, 2)
+
+
+def string(value: Any, field: str) -> str:
+    """A non-empty string."""
+    if not isinstance(value, str) or not value:
+        raise InputError(field, f"expected a non-empty string, got {value!r}", "write a name")
+    return value
+
+
+def placement(position: Any, rpy: Any, field: str) -> pin.SE3:
+    """SE3 from a position (3,) [m] and roll-pitch-yaw angles (3,) [rad]."""
+    p = vector(position, 3, f"{field}.position")
+    r = vector(rpy, 3, f"{field}.rpy")
+    return pin.SE3(pin.rpy.rpyToMatrix(*r), p)

@@ -1,0 +1,82 @@
+"""Cost terms: distance to the initial posture, force and torque regularization."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from .problem import BuildContext, Problem, Term
+
+
+@dataclass
+class PostureCost(Term):
+    """weight·(|qj - qj0|² + |p - p0|²/(0.1 m)² + |w|²): stay close to the initial posture."""
+
+    weight: float = 1.0
+    name: str = "posture"
+
+    def key(self) -> tuple[Any, ...]:
+        return ("posture",)
+
+    def declare(self, ctx: BuildContext) -> None:
+        nlp = ctx.nlp
+        qj0 = nlp.parameter("posture.joints0", ctx.robot.nj)
+        p0 = nlp.parameter("posture.base0", 3)
+        w = nlp.x["base.rotation"][0]
+        weight = nlp.parameter("posture.weight", 1)
+        nlp.minimize(
+            self.name,
+            weight * (ca.sumsqr(ctx.joints - qj0) + ca.sumsqr(ctx.base_position - p0) / 0.01
+                      + ca.sumsqr(w)),
+        )
+
+    def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
+        return {
+            "posture.joints0": problem.q_init[7:],
+            "posture.base0": problem.q_init[0:3],
+            "posture.weight": np.array([self.weight]),
+        }
+
+
+@dataclass
+class ForceCost(Term):
+    """weight·Σ|f_i|²/W²: spreads the load over the contact points (W the robot's weight)."""
+
+    weight: float = 1e-2
+    name: str = "forces"
+
+    def key(self) -> tuple[Any, ...]:
+        return ("forces",)
+
+    def declare(self, ctx: BuildContext) -> None:
+        W = ctx.robot.weight
+        weight = ctx.nlp.parameter("forces.weight", 1)
+        total = sum((ca.sumsqr(f) for _, _, f in ctx.force_points), ca.SX(0))
+        ctx.nlp.minimize(self.name, weight * total / W**2)
+
+    def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
+        return {"forces.weight": np.array([self.weight])}
+
+
+@dataclass
+class TorqueCost(Term):
+    """weight·Σ(τ_j/effort_j)²: prefers postures far from the torque limits."""
+
+    weight: float = 1e-2
+    name: str = "torques"
+
+    def key(self) -> tuple[Any, ...]:
+        return ("torques",)
+
+    def declare(self, ctx: BuildContext) -> None:
+        effort = ctx.robot.effort_limit
+        scale = np.where(np.isfinite(effort), effort, 100.0)
+        weight = ctx.nlp.parameter("torques.weight", 1)
+        tau = ctx.torques
+        ctx.nlp.minimize(self.name, weight * ca.sumsqr(tau / ca.DM(scale)))
+
+    def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
+        return {"torques.weight": np.array([self.weight])}

@@ -1,0 +1,273 @@
+"""The posture problem (paper eq. 1) as a CasADi nonlinear program.
+
+Building is separate from solving. A :class:`Problem` lists *terms* (the configuration, contacts,
+tasks, the static equilibrium, costs). Each term declares its symbolic variables, parameters,
+constraints and costs once per problem *structure* (:meth:`Term.key`), and gives the numeric
+parameter values and initial guess of one instance. The compiled program is cached by structure,
+so a second problem of the same shape (other targets, other contact poses) pays no set-up.
+"""
+
+from __future__ import annotations
+
+import collections
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from .errors import SolveError
+from .kinematics import CasadiKinematics, KinematicState, so3_exp
+from .robot import Robot
+from .scene import Scene
+
+ArrayLike = np.ndarray | float
+
+
+class NLP:
+    """Symbolic pieces of one program: x (variables), p (parameters), g (constraints), cost."""
+
+    def __init__(self) -> None:
+        self.x: dict[str, tuple[ca.SX, np.ndarray, np.ndarray]] = {}
+        self.p: dict[str, ca.SX] = {}
+        self.g: dict[str, tuple[ca.SX, np.ndarray, np.ndarray]] = {}
+        self.costs: dict[str, ca.SX] = {}
+        self.outputs: dict[str, ca.SX] = {}
+
+    def variable(self, name: str, n: int, lb: ArrayLike = -np.inf, ub: ArrayLike = np.inf) -> ca.SX:
+        """Declare n variables with (constant) bounds."""
+        if name in self.x:
+            raise SolveError(f"variable block '{name}' declared twice")
+        sym = ca.SX.sym(name, n)
+        self.x[name] = (sym, np.broadcast_to(lb, (n,)).astype(float), np.broadcast_to(ub, (n,)).astype(float))
+        return sym
+
+    def parameter(self, name: str, n: int) -> ca.SX:
+        """Declare n parameters, given numerically at each solve."""
+        if name in self.p:
+            raise SolveError(f"parameter block '{name}' declared twice")
+        self.p[name] = ca.SX.sym(name, n)
+        return self.p[name]
+
+    def constrain(self, name: str, expr: ca.SX, lb: ArrayLike, ub: ArrayLike) -> None:
+        """lb <= expr <= ub (use lb == ub for equalities)."""
+        if name in self.g:
+            raise SolveError(f"constraint block '{name}' declared twice")
+        expr = ca.vec(ca.SX(expr))
+        n = expr.shape[0]
+        self.g[name] = (expr, np.broadcast_to(lb, (n,)).astype(float), np.broadcast_to(ub, (n,)).astype(float))
+
+    def minimize(self, name: str, expr: ca.SX) -> None:
+        """Add a scalar term to the cost."""
+        self.costs[name] = self.costs.get(name, 0) + expr
+
+    def output(self, name: str, expr: ca.SX) -> None:
+        """An expression evaluated at the solution (torques, world points...)."""
+        self.outputs[name] = ca.vec(ca.SX(expr))
+
+
+@dataclass
+class BuildContext:
+    """What terms share while declaring: the robot, its symbolic state, contact forces."""
+
+    robot: Robot
+    nlp: NLP
+    kin: CasadiKinematics
+    state: KinematicState | None = None
+    base_position: ca.SX | None = None  # (3,)
+    joints: ca.SX | None = None  # (nj,)
+    # (joint id, world point (3,), world force on the robot (3,)) of every force-bearing point
+    force_points: list[tuple[int, ca.SX, ca.SX]] = field(default_factory=list)
+    torques: ca.SX | None = None  # (nj,) actuated joint torques, set by the equilibrium
+
+
+class Term(ABC):
+    """Something that adds variables, constraints or costs to the posture problem."""
+
+    name: str
+
+    @abstractmethod
+    def key(self) -> tuple[Any, ...]:
+        """Everything that changes the program's structure (not its parameter values)."""
+
+    @abstractmethod
+    def declare(self, ctx: BuildContext) -> None:
+        """Add symbolic variables, parameters, constraints and costs to ``ctx.nlp``."""
+
+    def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
+        """Numeric values of the parameters this term declared."""
+        return {}
+
+    def initial_guess(self, problem: Problem) -> dict[str, np.ndarray]:
+        """Initial values of the variables this term declared (zero when absent)."""
+        return {}
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """IPOPT settings."""
+
+    tol: float = 1e-8
+    constr_viol_tol: float = 1e-9
+    max_iter: int = 200
+    max_cpu_time: float = 30.0
+    print_level: int = 0
+
+    def ipopt(self) -> dict[str, Any]:
+        """The options dict passed to casadi.nlpsol."""
+        return {
+            "ipopt.tol": self.tol,
+            "ipopt.constr_viol_tol": self.constr_viol_tol,
+            "ipopt.max_iter": self.max_iter,
+            "ipopt.max_cpu_time": self.max_cpu_time,
+            "ipopt.print_level": self.print_level,
+            "ipopt.sb": "yes",
+            "ipopt.mu_strategy": "adaptive",
+            "ipopt.bound_relax_factor": 0.0,
+            "print_time": False,
+            "error_on_fail": False,
+        }
+
+
+@dataclass
+class CompiledNLP:
+    """A built solver with the layout of its x, p and g vectors."""
+
+    key: tuple[Any, ...]
+    solver: ca.Function
+    outputs: ca.Function  # (x, p) -> outputs
+    x_index: dict[str, slice]
+    p_index: dict[str, slice]
+    g_index: dict[str, slice]
+    cost_names: list[str]
+    lbx: np.ndarray
+    ubx: np.ndarray
+    lbg: np.ndarray
+    ubg: np.ndarray
+    build_time_s: float
+
+    @property
+    def n_x(self) -> int:
+        """Number of variables."""
+        return self.lbx.size
+
+    @property
+    def n_g(self) -> int:
+        """Number of constraint rows."""
+        return self.lbg.size
+
+
+def _layout(blocks: dict[str, Any], size: Any) -> dict[str, slice]:
+    out, k = {}, 0
+    for name, item in blocks.items():
+        n = size(item)
+        out[name] = slice(k, k + n)
+        k += n
+    return out
+
+
+_CACHE: collections.OrderedDict[tuple[Any, ...], CompiledNLP] = collections.OrderedDict()
+_CACHE_SIZE = 32
+
+
+@dataclass
+class Problem:
+    """A posture problem: robot, scene, terms and the initial posture.
+
+    Build it with :func:`posturegen.spec.problem_from_dict` or by hand; inspect it with
+    :meth:`summary`; solve it with :func:`posturegen.solve.solve`.
+    """
+
+    robot: Robot
+    scene: Scene
+    contacts: list[Any]  # posturegen.contacts.Contact
+    tasks: list[Term]
+    costs: list[Term]
+    q_init: np.ndarray  # (nq,) initial posture: warm start and posture-cost reference
+    self_collision: bool = False
+    solver_options: SolverOptions = field(default_factory=SolverOptions)
+
+    def terms(self) -> list[Term]:
+        """Every term in declaration order."""
+        from .constraints import ConfigurationTerm, StaticEquilibrium
+
+        return [ConfigurationTerm(), *self.contacts, *self.tasks, StaticEquilibrium(), *self.costs]
+
+    def key(self) -> tuple[Any, ...]:
+        """The structure key: robot plus each term's key plus solver options."""
+        return (id(self.robot.model), tuple(t.key() for t in self.terms()), self.solver_options)
+
+    def compile(self) -> CompiledNLP:
+        """The compiled program for this structure (built once, then cached)."""
+        key = self.key()
+        if key in _CACHE:
+            _CACHE.move_to_end(key)
+            return _CACHE[key]
+        import time
+
+        t0 = time.perf_counter()
+        nlp = NLP()
+        ctx = BuildContext(robot=self.robot, nlp=nlp, kin=self.robot.kinematics)
+        for term in self.terms():
+            term.declare(ctx)
+        x = ca.vertcat(*[v[0] for v in nlp.x.values()])
+        p = ca.vertcat(*nlp.p.values()) if nlp.p else ca.SX(0, 1)
+        g = ca.vertcat(*[v[0] for v in nlp.g.values()])
+        cost = sum(nlp.costs.values()) if nlp.costs else ca.SX(0)
+        solver = ca.nlpsol("posture", "ipopt", {"x": x, "p": p, "f": cost, "g": g},
+                           self.solver_options.ipopt())
+        names = list(nlp.outputs)
+        outputs = ca.Function("outputs", [x, p], [nlp.outputs[n] for n in names] +
+                              [nlp.costs[n] for n in nlp.costs], ["x", "p"],
+                              names + [f"cost.{n}" for n in nlp.costs])
+        compiled = CompiledNLP(
+            key=key,
+            solver=solver,
+            outputs=outputs,
+            x_index=_layout(nlp.x, lambda v: v[0].shape[0]),
+            p_index=_layout(nlp.p, lambda v: v.shape[0]),
+            g_index=_layout(nlp.g, lambda v: v[0].shape[0]),
+            cost_names=list(nlp.costs),
+            lbx=np.concatenate([v[1] for v in nlp.x.values()]),
+            ubx=np.concatenate([v[2] for v in nlp.x.values()]),
+            lbg=np.concatenate([v[1] for v in nlp.g.values()]),
+            ubg=np.concatenate([v[2] for v in nlp.g.values()]),
+            build_time_s=time.perf_counter() - t0,
+        )
+        _CACHE[key] = compiled
+        while len(_CACHE) > _CACHE_SIZE:
+            _CACHE.popitem(last=False)
+        return compiled
+
+    def numeric(self, compiled: CompiledNLP) -> tuple[np.ndarray, np.ndarray]:
+        """(x0, p) of this instance for a compiled structure."""
+        x0 = np.zeros(compiled.n_x)
+        p = np.zeros(sum(s.stop - s.start for s in compiled.p_index.values()))
+        for term in self.terms():
+            for name, value in term.parameters(self).items():
+                p[compiled.p_index[name]] = np.ravel(value, order="F")
+            for name, value in term.initial_guess(self).items():
+                x0[compiled.x_index[name]] = np.ravel(value, order="F")
+        return x0, p
+
+    def summary(self) -> str:
+        """Human-readable sizes of the program: variable and constraint blocks, cost terms."""
+        c = self.compile()
+        lines = [f"robot {self.robot.name}: nq={self.robot.model.nq}, nv={self.robot.model.nv}",
+                 f"variables: {c.n_x}"]
+        lines += [f"  {n}: {s.stop - s.start}" for n, s in c.x_index.items()]
+        lines.append(f"constraints: {c.n_g}")
+        lines += [f"  {n}: {s.stop - s.start}" for n, s in c.g_index.items()]
+        lines.append("costs: " + ", ".join(c.cost_names))
+        return "\n".join(lines)
+
+    def constraint_counts(self) -> dict[str, int]:
+        """Rows per constraint block."""
+        c = self.compile()
+        return {n: s.stop - s.start for n, s in c.g_index.items()}
+
+
+def base_rotation(R0: ca.SX, w: ca.SX) -> ca.SX:
+    """Base orientation R = R0 · exp([w]×): a local exponential map around the initial one."""
+    return R0 @ so3_exp(w)

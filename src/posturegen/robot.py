@@ -1,0 +1,276 @@
+"""Robots: a Pinocchio model with a free-flyer root, torque limits and named contact patches.
+
+A *patch* is a convex polygon in its own frame, whose z axis is the patch's outward normal,
+rigidly attached to a Pinocchio frame: ``T_frame_patch``. Bundled robots come from the
+``example-robot-data`` package with patch files shipped in ``posturegen/data/robots``.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.metadata
+import importlib.resources
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+import yaml
+
+from . import _fields as F
+from .errors import InputError, ModelError
+from .geometry import ConvexPolygon
+from .kinematics import CasadiKinematics
+
+BUNDLED = ("talos",)
+
+
+def example_robot_data_dir() -> Path:
+    """Folder ``robots/`` of the installed example-robot-data package."""
+    try:
+        dist = importlib.metadata.distribution("example-robot-data")
+    except importlib.metadata.PackageNotFoundError as exc:  # pragma: no cover - install issue
+        raise ModelError("example-robot-data is not installed (pip install example-robot-data)") from exc
+    root = Path(str(dist.locate_file("cmeel.prefix/share/example-robot-data/robots")))
+    if not root.is_dir():  # pragma: no cover - install issue
+        raise ModelError(f"example-robot-data has no robots folder at {root}")
+    return root
+
+
+@dataclass(frozen=True)
+class Patch:
+    """A convex contact polygon on the robot: vertices in the patch frame, z = outward normal."""
+
+    name: str
+    frame: str  # Pinocchio frame the patch is attached to
+    frame_id: int
+    joint_id: int  # parent joint of that frame
+    T_frame_patch: pin.SE3  # patch in its frame
+    T_joint_patch: pin.SE3  # patch in the frame's parent joint
+    polygon: ConvexPolygon
+
+
+@dataclass
+class Robot:
+    """A humanoid model ready for posture generation."""
+
+    name: str
+    model: pin.Model
+    urdf: Path
+    srdf: Path | None
+    package_dirs: tuple[Path, ...]
+    patches: dict[str, Patch]
+    q_init: np.ndarray  # (nq,) default initial posture
+    reference_configurations: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.kinematics = CasadiKinematics(self.model)
+        self.nj = self.model.nv - 6
+        # Torque limits of the actuated joints [N·m or N]; inf where the URDF gives none.
+        effort = np.array(self.model.effortLimit[6:], dtype=float)
+        effort[~np.isfinite(effort) | (effort <= 0) | (effort > 1e10)] = np.inf
+        self.effort_limit = effort  # (nj,)
+        self.q_lower = np.array(self.model.lowerPositionLimit[7:], dtype=float)  # (nj,)
+        self.q_upper = np.array(self.model.upperPositionLimit[7:], dtype=float)  # (nj,)
+        self.q_lower[self.q_lower < -1e10] = -np.inf
+        self.q_upper[self.q_upper > 1e10] = np.inf
+        self.joint_names = [self.model.names[i] for i in self.kinematics.actuated_joint_ids()]
+        self._collision_model: pin.GeometryModel | None = None
+
+    @property
+    def mass(self) -> float:
+        """Total mass [kg]."""
+        return self.kinematics.total_mass
+
+    @property
+    def weight(self) -> float:
+        """Total weight m·|g| [N]."""
+        return self.mass * float(np.linalg.norm(self.model.gravity.linear))
+
+    def frame_id(self, name: str, field_name: str = "frame") -> int:
+        """Pinocchio frame id, or an InputError naming the field."""
+        if not self.model.existFrame(name):
+            raise InputError(field_name, f"robot '{self.name}' has no frame '{name}'",
+                             "use a link or frame name of the URDF")
+        return int(self.model.getFrameId(name))
+
+    def patch(self, name: str, field_name: str = "robot_patch") -> Patch:
+        """A named patch, or an InputError listing the known ones."""
+        if name not in self.patches:
+            raise InputError(field_name, f"robot '{self.name}' has no patch '{name}'",
+                             f"known patches: {', '.join(sorted(self.patches)) or 'none'}")
+        return self.patches[name]
+
+    def initial_configuration(self, initial: Any = None, field_name: str = "options.initial") -> np.ndarray:
+        """q (nq,) from a reference-configuration name, an explicit list, or the default."""
+        if initial is None:
+            return self.q_init.copy()
+        if isinstance(initial, str):
+            if initial not in self.reference_configurations:
+                known = ", ".join(sorted(self.reference_configurations)) or "none"
+                raise InputError(field_name, f"unknown reference posture '{initial}'",
+                                 f"known: {known}, or give the {self.model.nq} numbers of q")
+            return self.reference_configurations[initial].copy()
+        q = F.vector(initial, self.model.nq, field_name)
+        if abs(np.linalg.norm(q[3:7]) - 1.0) > 1e-6:
+            raise InputError(field_name, "the base quaternion q[3:7] is not unit",
+                             "give a unit quaternion (x, y, z, w)")
+        return q
+
+    def collision_model(self) -> pin.GeometryModel:
+        """The URDF's collision geometry (meshes), loaded on first use."""
+        if self._collision_model is None:
+            try:
+                self._collision_model = pin.buildGeomFromUrdf(
+                    self.model, str(self.urdf), pin.GeometryType.COLLISION,
+                    package_dirs=[str(p) for p in self.package_dirs],
+                )
+            except ValueError as exc:
+                raise ModelError(f"cannot load collision meshes of {self.urdf}: {exc}") from exc
+        return self._collision_model
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``robot`` entry of a posture file."""
+        return {
+            "name": self.name,
+            "urdf": str(self.urdf.resolve()),
+            "srdf": str(self.srdf.resolve()) if self.srdf else None,
+            "package_dirs": [str(p.resolve()) for p in self.package_dirs],
+        }
+
+
+def _load_patches(model: pin.Model, data: Any, field_name: str) -> dict[str, Patch]:
+    patches_raw = F.require_mapping(data, field_name)
+    patches: dict[str, Patch] = {}
+    for name, spec in patches_raw.items():
+        fld = f"{field_name}.{name}"
+        spec = F.require_mapping(spec, fld)
+        F.check_keys(spec, fld, ["frame", "vertices"], ["position", "rpy"])
+        frame = F.string(spec["frame"], f"{fld}.frame")
+        if not model.existFrame(frame):
+            raise InputError(f"{fld}.frame", f"the model has no frame '{frame}'",
+                             "use a link or frame name of the URDF")
+        fid = int(model.getFrameId(frame))
+        T = F.placement(spec.get("position", [0, 0, 0]), spec.get("rpy", [0, 0, 0]), fld)
+        poly = ConvexPolygon(F.points2d(spec["vertices"], f"{fld}.vertices"), field=f"{fld}.vertices")
+        f = model.frames[fid]
+        patches[str(name)] = Patch(str(name), frame, fid, int(f.parentJoint), T, f.placement * T, poly)
+    return patches
+
+
+def read_patch_file(path: Path) -> dict[str, Any]:
+    """Parse a patch YAML file (see README, "Patch files")."""
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise InputError("robot.patches", f"cannot read {path}: {exc.strerror}",
+                         "give the path of an existing patch YAML file") from exc
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise InputError("robot.patches", f"{path} is not valid YAML ({exc.__class__.__name__})",
+                         "fix the YAML syntax") from exc
+    return dict(F.require_mapping(data, "robot.patches"))
+
+
+def _bundled_patch_file(name: str) -> Path:
+    return Path(str(importlib.resources.files("posturegen") / "data" / "robots" / f"{name}.yaml"))
+
+
+def build_robot(
+    name: str,
+    urdf: Path,
+    srdf: Path | None,
+    package_dirs: tuple[Path, ...],
+    patch_data: dict[str, Any],
+    initial: Any = None,
+) -> Robot:
+    """Load a URDF with a free-flyer root, its SRDF reference postures, and patches."""
+    if not urdf.is_file():
+        raise InputError("robot.urdf", f"no file {urdf}", "give the path of an existing URDF")
+    if srdf is not None and not srdf.is_file():
+        raise InputError("robot.srdf", f"no file {srdf}", "give the path of an existing SRDF")
+    try:
+        model = pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
+    except (ValueError, RuntimeError) as exc:
+        raise InputError("robot.urdf", f"Pinocchio cannot parse {urdf}: {exc}", "fix the URDF") from exc
+    refs: dict[str, np.ndarray] = {}
+    if srdf is not None:
+        try:
+            pin.loadReferenceConfigurations(model, str(srdf), False)
+        except (ValueError, RuntimeError) as exc:
+            raise InputError("robot.srdf", f"cannot read {srdf}: {exc}", "fix the SRDF") from exc
+        for entry in model.referenceConfigurations:
+            refs[str(entry.key())] = np.array(entry.data(), dtype=float)
+    patches = _load_patches(model, patch_data.get("patches", {}), "patches")
+    q_neutral = pin.neutral(model)
+    q_neutral[2] = 0.0
+    robot = Robot(name, model, urdf, srdf, package_dirs, patches, q_neutral, refs)
+    init = initial if initial is not None else patch_data.get("initial")
+    robot.q_init = robot.initial_configuration(init, "initial") if init is not None else q_neutral
+    return robot
+
+
+@functools.lru_cache(maxsize=8)
+def load_bundled(name: str) -> Robot:
+    """A robot shipped with posturegen, by name (models from example-robot-data)."""
+    if name not in BUNDLED:
+        raise InputError("robot", f"unknown robot '{name}'",
+                         f"bundled robots: {', '.join(BUNDLED)}, or give {{urdf: PATH, ...}}")
+    data = read_patch_file(_bundled_patch_file(name))
+    root = example_robot_data_dir()
+    return build_robot(
+        name,
+        root / data["urdf"],
+        root / data["srdf"] if data.get("srdf") else None,
+        (root.parent.parent,),
+        data,
+    )
+
+
+@functools.lru_cache(maxsize=8)
+def _load_custom(urdf: str, srdf: str | None, patches: str | None, package_dirs: tuple[str, ...]) -> Robot:
+    urdf_path = Path(urdf).expanduser().resolve()
+    data: dict[str, Any] = {}
+    if patches is not None:
+        bundled = _bundled_patch_file(patches)
+        data = read_patch_file(bundled if ("/" not in patches and bundled.is_file()) else Path(patches))
+    return build_robot(
+        urdf_path.stem,
+        urdf_path,
+        Path(srdf).expanduser().resolve() if srdf else None,
+        tuple(Path(p).expanduser().resolve() for p in package_dirs) or (urdf_path.parent,),
+        data,
+    )
+
+
+def load_robot(spec: Any, base_dir: Path | None = None) -> Robot:
+    """A robot from a bundled name or ``{urdf, srdf, patches, package_dirs}`` (paths relative
+    to ``base_dir``, the problem file's folder)."""
+    if isinstance(spec, str):
+        return load_bundled(spec)
+    spec = F.require_mapping(spec, "robot")
+    F.check_keys(spec, "robot", ["urdf"], ["srdf", "patches", "package_dirs", "name"])
+    base = base_dir or Path.cwd()
+
+    def rel(value: Any, fld: str) -> str:
+        return str((base / Path(F.string(value, fld)).expanduser()).resolve())
+
+    patches = spec.get("patches")
+    if patches is not None:
+        patches = F.string(patches, "robot.patches")
+        if "/" in patches or patches.endswith((".yaml", ".yml")):
+            patches = rel(patches, "robot.patches")
+    dirs = spec.get("package_dirs", [])
+    if not isinstance(dirs, list):
+        raise InputError("robot.package_dirs", "expected a list of folders", "write [PATH, ...]")
+    robot = _load_custom(
+        rel(spec["urdf"], "robot.urdf"),
+        rel(spec["srdf"], "robot.srdf") if spec.get("srdf") else None,
+        patches,
+        tuple(rel(d, f"robot.package_dirs[{i}]") for i, d in enumerate(dirs)),
+    )
+    if "name" in spec:
+        robot.name = F.string(spec["name"], "robot.name")
+    return robot

@@ -1,0 +1,172 @@
+"""Problem files (YAML, see README "Problem file") -> :class:`~posturegen.problem.Problem`.
+
+Every mistake raises one :class:`~posturegen.errors.InputError` naming the field and the fix.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+import yaml
+
+from . import _fields as F
+from .constraints import PositionTask
+from .contacts import FixedContact, FrictionModel
+from .costs import ForceCost, PostureCost, TorqueCost
+from .errors import InputError
+from .problem import Problem, SolverOptions, Term
+from .robot import Robot, load_robot
+from .scene import Scene
+
+CONTACT_TYPES = ("fixed",)
+_TOP_REQUIRED = ("robot", "contacts")
+_TOP_OPTIONAL = ("mu", "surfaces", "obstacles", "tasks", "options", "costs", "friction", "name",
+                 "description")
+
+
+def read_yaml(path: str | Path) -> Any:
+    """Parse a YAML file, or raise an InputError naming the file."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError as exc:
+        raise InputError(str(path), "no such file", "give the path of an existing file") from exc
+    except OSError as exc:
+        raise InputError(str(path), f"cannot read it ({exc.strerror})", "check the path") from exc
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise InputError(str(path), f"invalid YAML{where}", "fix the YAML syntax") from exc
+
+
+def load_problem(path: str | Path) -> Problem:
+    """Read and validate a problem file."""
+    path = Path(path)
+    return problem_from_dict(read_yaml(path), base_dir=path.parent)
+
+
+def _friction(value: Any, field: str) -> FrictionModel:
+    if value is None:
+        return FrictionModel()
+    if value == "cone":
+        return FrictionModel("cone")
+    v = F.require_mapping(value, field)
+    F.check_keys(v, field, ["model"], ["faces"])
+    kind = F.string(v["model"], f"{field}.model")
+    if kind not in ("pyramid", "cone"):
+        raise InputError(f"{field}.model", f"unknown friction model '{kind}'", "use pyramid or cone")
+    faces = v.get("faces", 4)
+    if isinstance(faces, bool) or not isinstance(faces, int) or faces < 3:
+        raise InputError(f"{field}.faces", f"expected an integer >= 3, got {faces!r}", "use 4 or 8")
+    return FrictionModel(kind, faces)
+
+
+def _contact(c: Any, i: int, robot: Robot, scene: Scene, mu: float,
+             friction: FrictionModel, names: set[str]) -> FixedContact:
+    fld = f"contacts[{i}]"
+    c = F.require_mapping(c, fld)
+    F.check_keys(c, fld, ["robot_patch", "surface", "type"],
+                 ["position", "yaw", "mu", "name", "friction"])
+    ctype = F.string(c["type"], f"{fld}.type")
+    if ctype not in CONTACT_TYPES:
+        raise InputError(f"{fld}.type", f"unknown contact type '{ctype}'",
+                         f"use one of: {', '.join(CONTACT_TYPES)}")
+    patch = robot.patch(F.string(c["robot_patch"], f"{fld}.robot_patch"), f"{fld}.robot_patch")
+    surface = scene.surface(F.string(c["surface"], f"{fld}.surface"), f"{fld}.surface")
+    name = F.string(c.get("name", patch.name), f"{fld}.name")
+    if name in names:
+        raise InputError(f"{fld}.name", f"two contacts are named '{name}'",
+                         "give each contact a unique name")
+    names.add(name)
+    mu_c = F.number(c.get("mu", mu), f"{fld}.mu", minimum=0.0)
+    fric = _friction(c["friction"], f"{fld}.friction") if "friction" in c else friction
+    if "position" not in c:
+        raise InputError(f"{fld}.position", "missing for a fixed contact",
+                         "add position: [x, y] in the surface frame")
+    pos = F.vector(c["position"], 2, f"{fld}.position")
+    yaw = F.number(c.get("yaw", 0.0), f"{fld}.yaw")
+    try:
+        return FixedContact(name, patch, surface, pos, yaw, mu_c, fric)
+    except InputError as exc:
+        raise InputError(fld, exc.problem, exc.fix) from exc
+
+
+def _task(t: Any, i: int, robot: Robot) -> PositionTask:
+    fld = f"tasks[{i}]"
+    t = F.require_mapping(t, fld)
+    F.check_keys(t, fld, ["type", "frame", "target"], ["rpy", "weight"])
+    if t["type"] != "position":
+        raise InputError(f"{fld}.type", f"unknown task type {t['type']!r}", "use position")
+    frame = F.string(t["frame"], f"{fld}.frame")
+    fid = robot.frame_id(frame, f"{fld}.frame")
+    target = F.vector(t["target"], 3, f"{fld}.target")
+    R = None
+    if t.get("rpy") is not None:
+        R = pin.rpy.rpyToMatrix(*F.vector(t["rpy"], 3, f"{fld}.rpy"))
+    weight = F.number(t["weight"], f"{fld}.weight", positive=True) if t.get("weight") is not None else None
+    return PositionTask(frame, fid, target, R, weight, index=i)
+
+
+def _costs(value: Any) -> list[Term]:
+    v = F.require_mapping(value if value is not None else {}, "costs")
+    F.check_keys(v, "costs", [], ["posture", "forces", "torques"])
+    out: list[Term] = [PostureCost(F.number(v.get("posture", 1.0), "costs.posture", minimum=0.0))]
+    out.append(ForceCost(F.number(v.get("forces", 1e-2), "costs.forces", minimum=0.0)))
+    if v.get("torques"):
+        out.append(TorqueCost(F.number(v["torques"], "costs.torques", minimum=0.0)))
+    return out
+
+
+def _solver_options(value: Any) -> SolverOptions:
+    v = F.require_mapping(value, "options.solver")
+    F.check_keys(v, "options.solver", [], ["tol", "max_iter", "max_cpu_time", "print_level"])
+    base = SolverOptions()
+    max_iter = v.get("max_iter", base.max_iter)
+    if isinstance(max_iter, bool) or not isinstance(max_iter, int) or max_iter < 1:
+        raise InputError("options.solver.max_iter", f"expected a positive integer, got {max_iter!r}",
+                         "write e.g. 200")
+    return SolverOptions(
+        tol=F.number(v.get("tol", base.tol), "options.solver.tol", positive=True),
+        max_iter=max_iter,
+        max_cpu_time=F.number(v.get("max_cpu_time", base.max_cpu_time),
+                              "options.solver.max_cpu_time", positive=True),
+        print_level=int(F.number(v.get("print_level", base.print_level), "options.solver.print_level",
+                                 minimum=0)),
+    )
+
+
+def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
+    """Validate a problem-file dict and build the :class:`Problem`."""
+    data = F.require_mapping(data, "problem")
+    F.check_keys(data, "problem", _TOP_REQUIRED, _TOP_OPTIONAL)
+    robot = load_robot(data["robot"], base_dir)
+    mu = F.number(data.get("mu", 0.7), "mu", minimum=0.0)
+    friction = _friction(data.get("friction"), "friction")
+    scene = Scene.from_dict(data.get("surfaces", []), data.get("obstacles", []))
+    contacts_raw = data["contacts"]
+    if not isinstance(contacts_raw, list) or not contacts_raw:
+        raise InputError("contacts", "expected a non-empty list", "add at least one contact")
+    names: set[str] = set()
+    contacts = [_contact(c, i, robot, scene, mu, friction, names) for i, c in enumerate(contacts_raw)]
+    tasks_raw = data.get("tasks", []) or []
+    if not isinstance(tasks_raw, list):
+        raise InputError("tasks", "expected a list", "write tasks: [{type: position, ...}]")
+    tasks: list[Term] = [_task(t, i, robot) for i, t in enumerate(tasks_raw)]
+    options = F.require_mapping(data.get("options", {}) or {}, "options")
+    F.check_keys(options, "options", [], ["initial", "self_collision", "solver"])
+    q_init = robot.initial_configuration(options.get("initial"), "options.initial")
+    self_collision = options.get("self_collision", False)
+    if not isinstance(self_collision, bool):
+        raise InputError("options.self_collision", f"expected true or false, got {self_collision!r}",
+                         "write true or false")
+    if self_collision:
+        raise InputError("options.self_collision", "collision avoidance is not available yet",
+                         "set self_collision: false")
+    solver = _solver_options(options.get("solver", {}) or {})
+    return Problem(robot, scene, contacts, tasks, _costs(data.get("costs")), np.asarray(q_init),
+                   self_collision, solver)

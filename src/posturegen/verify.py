@@ -1,0 +1,195 @@
+"""Independent numeric re-check of a posture with Pinocchio (never with the solver's CasADi).
+
+It reads only the posture's public content (the posture-file dict), so ``posturegen verify
+FILE`` and :func:`posturegen.solve.solve` run exactly the same checks:
+
+- q: right size, finite, unit base quaternion, within joint limits;
+- torques within effort limits, and the static equilibrium ``[0; τ] + Σ J_iᵀ f_i - g(q) = 0``
+  with J_i the Jacobian of each force's application point (its frame's joint);
+- contact geometry: each robot patch lies in its surface plane with opposite normals, a fixed
+  contact sits at its given pose, each force point lies in both polygons, each ellipse lies in
+  both polygons;
+- friction: each force inside its exact cone |f_t| <= μ f_n (f_n >= 0);
+- tasks: each hard target reached.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from .geometry import ConvexPolygon, Ellipse
+
+# Tolerances of the re-check. Lengths [m], angles [rad], forces relative to the weight.
+TOL_JOINT = 1e-6  # [rad] or [m]
+TOL_TORQUE = 1e-6  # relative to the effort limit
+TOL_EQUILIBRIUM = 1e-6  # relative to the robot's weight [N] (and weight·1 m [N·m])
+TOL_GEOMETRY = 1e-6  # [m] and [rad]
+TOL_FRICTION = 1e-6  # relative to the robot's weight [N]
+TOL_TASK = 1e-6  # [m] and [rad]
+
+
+@dataclass(frozen=True)
+class Check:
+    """One verified quantity: its worst value, the tolerance, and whether it passed."""
+
+    name: str
+    value: float
+    tolerance: float
+    detail: str = ""
+
+    @property
+    def ok(self) -> bool:
+        """value <= tolerance (NaN fails)."""
+        return bool(self.value <= self.tolerance)
+
+
+@dataclass(frozen=True)
+class VerifyReport:
+    """All checks of one posture."""
+
+    checks: tuple[Check, ...]
+
+    @property
+    def ok(self) -> bool:
+        """Every check passed."""
+        return all(c.ok for c in self.checks)
+
+    @property
+    def failures(self) -> tuple[Check, ...]:
+        """The checks that failed."""
+        return tuple(c for c in self.checks if not c.ok)
+
+    @property
+    def max_violation(self) -> float:
+        """Largest value/tolerance ratio times the tolerance unit, i.e. the worst raw value."""
+        return max((c.value for c in self.checks), default=0.0)
+
+    def summary(self) -> str:
+        """One line per check."""
+        return "\n".join(
+            f"{'ok  ' if c.ok else 'FAIL'} {c.name}: {c.value:.3g} (tolerance {c.tolerance:.1g})"
+            + (f" {c.detail}" if c.detail and not c.ok else "")
+            for c in self.checks
+        )
+
+
+def _poly_in_plane(T_world_plane: pin.SE3, points_world: np.ndarray) -> np.ndarray:
+    """World points -> (k, 3) coordinates in a plane's frame (z = height above it)."""
+    return (points_world - T_world_plane.translation) @ T_world_plane.rotation
+
+
+def verify_posture(posture: dict[str, Any], model: pin.Model) -> VerifyReport:
+    """Check a posture dict (posture-file content) against a Pinocchio model."""
+    data = model.createData()
+    checks: list[Check] = []
+    q = np.asarray(posture["q"], dtype=float)
+    if q.shape != (model.nq,) or not np.all(np.isfinite(q)):
+        return VerifyReport((Check("q", np.inf, 0.0, f"expected {model.nq} finite numbers"),))
+    checks.append(Check("base quaternion norm", abs(np.linalg.norm(q[3:7]) - 1.0), 1e-9))
+    lo, hi = model.lowerPositionLimit[7:], model.upperPositionLimit[7:]
+    excess = np.maximum(lo - q[7:], q[7:] - hi)
+    worst = int(np.argmax(excess)) if excess.size else 0
+    checks.append(Check("joint limits", float(max(excess.max(initial=0.0), 0.0)), TOL_JOINT,
+                        f"joint {model.names[worst + 2]}"))
+    tau = np.asarray(posture["torques"], dtype=float)
+    if tau.shape != (model.nv - 6,):
+        return VerifyReport((*checks, Check("torques", np.inf, 0.0, f"expected {model.nv - 6}")))
+    effort = np.array(model.effortLimit[6:], dtype=float)
+    finite = np.isfinite(effort) & (effort > 0) & (effort < 1e10)
+    over = np.where(finite, (np.abs(tau) - effort) / np.where(finite, effort, 1.0), 0.0)
+    checks.append(Check("torque limits", float(max(over.max(initial=0.0), 0.0)), TOL_TORQUE))
+
+    pin.forwardKinematics(model, data, q)
+    pin.updateFramePlacements(model, data)
+    pin.computeJointJacobians(model, data, q)
+    weight = pin.computeTotalMass(model) * float(np.linalg.norm(model.gravity.linear))
+    residual = -pin.computeGeneralizedGravity(model, data, q)
+    residual[6:] += tau
+    geo, fric, inside = 0.0, 0.0, 0.0
+    for contact in posture.get("contacts", []):
+        surf = contact["surface"]
+        T_ws = pin.SE3(np.array(surf["placement"], dtype=float))
+        P_s = ConvexPolygon(np.array(surf["vertices"], dtype=float))
+        rp = contact["robot_patch"]
+        fid = model.getFrameId(rp["frame"])
+        T_wc = data.oMf[fid] * pin.SE3(np.array(rp["placement"], dtype=float))
+        P_c = ConvexPolygon(np.array(rp["vertices"], dtype=float))
+        # coplanarity with opposite normals (paper eq. 2)
+        T_sc = T_ws.inverse() * T_wc
+        geo = max(geo, abs(T_sc.translation[2]), abs(T_sc.rotation[2, 0]), abs(T_sc.rotation[2, 1]),
+                  abs(T_sc.rotation[2, 2] + 1.0))
+        if contact.get("pose") is not None and contact["type"] == "fixed":
+            pos = np.asarray(contact["pose"]["position"], dtype=float)
+            yaw = float(contact["pose"]["yaw"])
+            geo = max(geo, float(np.abs(T_sc.translation[:2] - pos).max()),
+                      abs(float(np.arctan2(np.sin(_yaw(T_sc) - yaw), np.cos(_yaw(T_sc) - yaw)))))
+        mu = float(contact["mu"])
+        for f in contact.get("forces", []):
+            p_w = np.asarray(f["point"], dtype=float)
+            f_w = np.asarray(f["force"], dtype=float)
+            # the point must lie on both polygons: in the surface plane and inside both
+            p_s = _poly_in_plane(T_ws, p_w[None])[0]
+            p_c = _poly_in_plane(T_wc, p_w[None])[0]
+            geo = max(geo, abs(p_s[2]))
+            inside = max(inside, float(-P_s.distance_inside(p_s[None, :2])[0]),
+                         float(-P_c.distance_inside(p_c[None, :2])[0]))
+            n = T_ws.rotation[:, 2]
+            fn = float(n @ f_w)
+            ft = float(np.linalg.norm(f_w - fn * n))
+            fric = max(fric, (ft - mu * fn) / weight, -fn / weight)
+            # generalized force of f at p: Jᵀ f with J the point's LOCAL_WORLD_ALIGNED Jacobian
+            fr = model.frames[model.getFrameId(f["frame"])]
+            jid = fr.parentJoint
+            J = pin.getJointJacobian(model, data, jid, pin.LOCAL_WORLD_ALIGNED)
+            lever = p_w - data.oMi[jid].translation
+            residual += J[:3].T @ f_w + J[3:].T @ np.cross(lever, f_w)
+        ell = contact.get("ellipse")
+        if ell is not None:
+            inside = max(inside, _ellipse_outside(ell, T_ws, P_s, T_wc, P_c))
+    checks.append(Check("contact geometry", geo, TOL_GEOMETRY))
+    checks.append(Check("contact points inside polygons", max(inside, 0.0), TOL_GEOMETRY))
+    checks.append(Check("friction cones", max(fric, 0.0), TOL_FRICTION))
+    scale = np.full(model.nv, weight)
+    checks.append(Check("static equilibrium", float(np.abs(residual / scale).max()), TOL_EQUILIBRIUM))
+    task_err = 0.0
+    for task in posture.get("tasks", []):
+        if task.get("weight") is not None:
+            continue
+        M = data.oMf[model.getFrameId(task["frame"])]
+        task_err = max(task_err, float(np.abs(M.translation - np.asarray(task["target"])).max()))
+        if task.get("rotation") is not None:
+            err = pin.log3(np.asarray(task["rotation"], dtype=float).T @ M.rotation)
+            task_err = max(task_err, float(np.abs(err).max()))
+    checks.append(Check("tasks", task_err, TOL_TASK))
+    return VerifyReport(tuple(checks))
+
+
+def _yaw(T_sc: pin.SE3) -> float:
+    """ψ of T_sc = Trans·Rz(ψ)·Rx(π): the angle of the patch x axis in the surface plane."""
+    return float(np.arctan2(T_sc.rotation[1, 0], T_sc.rotation[0, 0]))
+
+
+def _ellipse_outside(ell: dict[str, Any], T_ws: pin.SE3, P_s: ConvexPolygon, T_wc: pin.SE3,
+                     P_c: ConvexPolygon) -> float:
+    """How far [m] the contact ellipse sticks out of either polygon (<= 0: inside both)."""
+    c = np.asarray(ell["center"], dtype=float)
+    a1, a2 = (np.asarray(a, dtype=float) for a in ell["axes"])
+    t = np.linspace(0, 2 * np.pi, 256, endpoint=False)
+    pts = c + np.outer(np.cos(t), a1) + np.outer(np.sin(t), a2)  # (256, 3) world
+    out = 0.0
+    for T, P in ((T_ws, P_s), (T_wc, P_c)):
+        loc = _poly_in_plane(T, pts)
+        out = max(out, float(np.abs(loc[:, 2]).max()), float(-P.distance_inside(loc[:, :2]).min()))
+    # an exact margin too (sampled points can miss a tangency): rebuild the ellipse in plane s
+    loc_c = _poly_in_plane(T_ws, c[None])[0]
+    u = T_ws.rotation.T @ a1
+    v = T_ws.rotation.T @ a2
+    r1, r2 = float(np.linalg.norm(u)), float(np.linalg.norm(v))
+    if r1 > 0 and r2 > 0:
+        e = Ellipse(loc_c[:2], float(np.arctan2(u[1], u[0])), (r1, r2))
+        out = max(out, -e.inside_margin(P_s))
+    return out
