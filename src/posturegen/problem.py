@@ -136,6 +136,7 @@ class CompiledNLP:
 
     key: tuple[Any, ...]
     solver: ca.Function
+    nlp: ca.Function  # (x, p) -> (f, g): the program itself, for inspection and tests
     outputs: ca.Function  # (x, p) -> outputs
     x_index: dict[str, slice]
     p_index: dict[str, slice]
@@ -224,6 +225,7 @@ class Problem:
         compiled = CompiledNLP(
             key=key,
             solver=solver,
+            nlp=ca.Function("nlp", [x, p], [cost, g], ["x", "p"], ["f", "g"]),
             outputs=outputs,
             x_index=_layout(nlp.x, lambda v: v[0].shape[0]),
             p_index=_layout(nlp.p, lambda v: v.shape[0]),

@@ -16,9 +16,7 @@ import numpy as np
 import pinocchio as pin
 
 from .problem import Problem
-from .verify import VerifyReport, verify_posture
-
-SCHEMA = "posturegen.posture/1"
+from .verify import SCHEMA, VerifyReport, verify_posture
 _IPOPT_OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
 
 

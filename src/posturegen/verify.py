@@ -15,13 +15,18 @@ FILE`` and :func:`posturegen.solve.solve` run exactly the same checks:
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
+from .errors import InputError
 from .geometry import ConvexPolygon, Ellipse
+
+SCHEMA = "posturegen.posture/1"
 
 # Tolerances of the re-check. Lengths [m], angles [rad], forces relative to the weight.
 TOL_JOINT = 1e-6  # [rad] or [m]
@@ -193,3 +198,37 @@ def _ellipse_outside(ell: dict[str, Any], T_ws: pin.SE3, P_s: ConvexPolygon, T_w
         e = Ellipse(loc_c[:2], float(np.arctan2(u[1], u[0])), (r1, r2))
         out = max(out, -e.inside_margin(P_s))
     return out
+
+
+def load_posture(path: str | Path) -> dict[str, Any]:
+    """Read a posture file and check its schema and required fields."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError as exc:
+        raise InputError(str(path), "no such file", "give the path of a posture.json") from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(str(path), "cannot read it", "check the path") from exc
+    except json.JSONDecodeError as exc:
+        raise InputError(str(path), f"invalid JSON at line {exc.lineno}", "give a posture file") from exc
+    if not isinstance(data, dict) or data.get("schema") != SCHEMA:
+        raise InputError(f"{path}: schema", f"expected \"{SCHEMA}\"",
+                         "give a file written by posturegen solve")
+    for key in ("robot", "q", "torques", "contacts"):
+        if key not in data:
+            raise InputError(f"{path}: {key}", "missing", "give a file written by posturegen solve")
+    return data
+
+
+def model_of_posture(posture: dict[str, Any]) -> pin.Model:
+    """The Pinocchio model named by a posture's ``robot`` entry (URDF + free flyer)."""
+    urdf = Path(str(posture["robot"].get("urdf", "")))
+    if not urdf.is_file():
+        raise InputError("robot.urdf", f"no file {urdf}", "regenerate the posture on this machine")
+    return pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
+
+
+def verify_file(path: str | Path) -> VerifyReport:
+    """Re-check a posture file (``posturegen verify``)."""
+    posture = load_posture(path)
+    return verify_posture(posture, model_of_posture(posture))

@@ -1,0 +1,37 @@
+"""posturegen: statically stable multi-contact postures of humanoid robots, with non-inclusive
+contacts (Brossette et al., IROS 2014).
+
+    >>> import posturegen as pg
+    >>> problem = pg.load_problem("problem.yaml")
+    >>> result = pg.solve(problem)
+    >>> result.success, result.q, result.torques
+"""
+
+from .errors import InputError, ModelError, PosturegenError, SolveError
+from .problem import Problem, SolverOptions
+from .robot import Robot, load_robot
+from .scene import Obstacle, Scene, Surface
+from .solve import Result, solve
+from .spec import load_problem, problem_from_dict
+from .verify import VerifyReport, verify_posture
+
+__all__ = [
+    "InputError",
+    "ModelError",
+    "Obstacle",
+    "PosturegenError",
+    "Problem",
+    "Result",
+    "Robot",
+    "Scene",
+    "SolveError",
+    "SolverOptions",
+    "Surface",
+    "VerifyReport",
+    "load_problem",
+    "load_robot",
+    "problem_from_dict",
+    "solve",
+    "verify_posture",
+]
+__version__ = "0.1.0"

@@ -1,0 +1,154 @@
+"""Seeded benchmark families (``posturegen bench``).
+
+Each family is a generator of problems of one structure. The report per family: success rate
+(verified postures), median/min/max of IPOPT's own wall time, the median of the whole call
+(build of the parameters, IPOPT, re-check), and the median iteration count. Solvers are built
+once per structure before timing (the first solve is a warm-up and is not counted).
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from .problem import Problem
+from .robot import load_bundled
+from .solve import solve
+from .spec import problem_from_dict
+
+
+@dataclass(frozen=True)
+class FamilyReport:
+    """Statistics of one family."""
+
+    family: str
+    description: str
+    n: int
+    successes: int
+    success_rate: float
+    median_solve_ms: float
+    min_solve_ms: float
+    max_solve_ms: float
+    median_call_ms: float
+    median_iterations: float
+    failures: tuple[str, ...]
+
+    def line(self) -> str:
+        """One human-readable line."""
+        return (
+            f"{self.family:<24} n={self.n:<4} success={100 * self.success_rate:5.1f}%  "
+            f"solve median={self.median_solve_ms:6.1f} ms  min={self.min_solve_ms:6.1f}  "
+            f"max={self.max_solve_ms:7.1f}  call median={self.median_call_ms:6.1f} ms  "
+            f"iterations median={self.median_iterations:.0f}"
+        )
+
+
+def _stance(rng: np.random.Generator) -> tuple[list[float], list[float], float, float, float]:
+    """Random stance: width [m], a global yaw and a yaw per foot [rad]."""
+    width = rng.uniform(0.16, 0.34)
+    yaw = rng.uniform(-np.pi, np.pi)
+    yaw_l, yaw_r = yaw + rng.uniform(-0.25, 0.25), yaw + rng.uniform(-0.25, 0.25)
+    side = np.array([-np.sin(yaw), np.cos(yaw)])
+    centre = rng.uniform(-0.3, 0.3, 2)
+    left = (centre + side * width / 2).tolist()
+    right = (centre - side * width / 2).tolist()
+    return left, right, yaw_l, yaw_r, yaw
+
+
+def _reachable_target(rng: np.random.Generator, centre: np.ndarray, yaw: float) -> list[float]:
+    """A right-gripper target from forward kinematics of a random arm and torso posture of
+    Talos' half-sitting stance, moved into the stance frame (hence reachable in practice)."""
+    robot = load_bundled("talos")
+    model = robot.model
+    data = model.createData()
+    q = robot.q_init.copy()
+    for name, lo, hi in (("torso_1_joint", -0.5, 0.5), ("torso_2_joint", -0.1, 0.5),
+                         ("arm_right_1_joint", -1.2, 0.6), ("arm_right_2_joint", -1.6, -0.1),
+                         ("arm_right_3_joint", -1.0, 1.0), ("arm_right_4_joint", -2.0, -0.1)):
+        jid = model.getJointId(name)
+        q[model.joints[jid].idx_q] = rng.uniform(lo, hi)
+    pin.framesForwardKinematics(model, data, q)
+    p = data.oMf[model.getFrameId("gripper_right_base_link")].translation
+    c, s = np.cos(yaw), np.sin(yaw)
+    return [centre[0] + c * p[0] - s * p[1], centre[1] + s * p[0] + c * p[1], float(p[2])]
+
+
+def talos_stand_reach(n: int, seed: int) -> Iterator[Problem]:
+    """Talos, two fixed feet at random stance widths and yaws, a right-gripper target."""
+    rng = np.random.default_rng(seed)
+    for _ in range(n):
+        left, right, yaw_l, yaw_r, yaw = _stance(rng)
+        centre = (np.array(left) + np.array(right)) / 2
+        target = _reachable_target(rng, centre, yaw)
+        yield problem_from_dict({
+            "robot": "talos",
+            "surfaces": [{"name": "ground", "vertices": [[-2, -2], [2, -2], [2, 2], [-2, 2]]}],
+            "contacts": [
+                {"robot_patch": "left_sole", "surface": "ground", "type": "fixed",
+                 "position": left, "yaw": yaw_l},
+                {"robot_patch": "right_sole", "surface": "ground", "type": "fixed",
+                 "position": right, "yaw": yaw_r},
+            ],
+            "tasks": [{"type": "position", "frame": "gripper_right_base_link", "target": target}],
+            "options": {"initial": _initial_at(centre, yaw)},
+        })
+
+
+def _initial_at(centre: np.ndarray, yaw: float) -> list[float]:
+    """Talos' half-sitting posture moved to a stance centre and heading."""
+    q = load_bundled("talos").q_init.copy()
+    q[0:2] = centre
+    q[3:7] = pin.Quaternion(pin.utils.rotate("z", yaw)).coeffs()
+    return q.tolist()
+
+
+FAMILIES: dict[str, tuple[str, Callable[[int, int], Iterator[Problem]]]] = {
+    "talos-stand-reach": (
+        "Talos, two fixed feet, random stance width/yaws, reachable right-hand targets",
+        talos_stand_reach,
+    ),
+}
+
+
+def run_family(name: str, n: int = 100, seed: int = 0) -> FamilyReport:
+    """Solve n seeded problems of a family and collect statistics."""
+    description, generator = FAMILIES[name]
+    problems = list(generator(n + 1, seed))
+    solve(problems[0])  # warm-up: builds the solver for this structure
+    times, calls, iters, ok, failures = [], [], [], 0, []
+    for i, problem in enumerate(problems[1:]):
+        t0 = time.perf_counter()
+        result = solve(problem)
+        calls.append(time.perf_counter() - t0)
+        times.append(result.solve_time_s)
+        iters.append(result.iterations)
+        if result.success:
+            ok += 1
+        else:
+            failures.append(f"#{i}: {result.message}")
+    ms = [1e3 * t for t in times]
+    return FamilyReport(
+        family=name,
+        description=description,
+        n=n,
+        successes=ok,
+        success_rate=ok / n,
+        median_solve_ms=statistics.median(ms),
+        min_solve_ms=min(ms),
+        max_solve_ms=max(ms),
+        median_call_ms=1e3 * statistics.median(calls),
+        median_iterations=statistics.median(iters),
+        failures=tuple(failures),
+    )
+
+
+def run(families: list[str] | None = None, n: int = 100, seed: int = 0) -> list[dict[str, Any]]:
+    """Run families (all by default); return their reports as dicts."""
+    names = families or list(FAMILIES)
+    return [asdict(run_family(name, n, seed)) for name in names]

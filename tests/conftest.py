@@ -1,0 +1,27 @@
+"""Shared fixtures: robots (Talos bundled; HRP-2 and ATLAS from ../shared/robots)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pinocchio as pin
+import pytest
+
+from posturegen.robot import load_bundled
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED_ROBOTS = ROOT.parent / "shared" / "robots"
+HRP2_URDF = SHARED_ROBOTS / "hrp2" / "hrp2.urdf"
+ATLAS_URDF = SHARED_ROBOTS / "drake_models" / "atlas" / "atlas_convex_hull.urdf"
+
+
+@pytest.fixture(scope="session")
+def talos():
+    return load_bundled("talos")
+
+
+def shared_model(urdf: Path) -> pin.Model:
+    """A free-flyer model of one of the shared URDFs; fails loudly when shared/ is missing."""
+    if not urdf.is_file():
+        raise FileNotFoundError(f"{urdf} missing: tests read the paper's robots from ../shared/robots")
+    return pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())

@@ -1,0 +1,121 @@
+"""The CasADi kinematics against Pinocchio's own numbers, to 1e-9, on seeded random q."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from posturegen.kinematics import CasadiKinematics, so3_exp
+from tests.conftest import ATLAS_URDF, HRP2_URDF, shared_model
+
+TOL = 1e-9
+
+
+def _models():
+    from posturegen.robot import load_bundled
+
+    return {
+        "talos": load_bundled("talos").model,
+        "hrp2": shared_model(HRP2_URDF),
+        "atlas": shared_model(ATLAS_URDF),
+    }
+
+
+MODELS = _models()
+
+
+def _random_q(model: pin.Model, rng: np.random.Generator) -> np.ndarray:
+    lo = np.where(np.isfinite(model.lowerPositionLimit), model.lowerPositionLimit, -3.0)
+    hi = np.where(np.isfinite(model.upperPositionLimit), model.upperPositionLimit, 3.0)
+    q = rng.uniform(np.maximum(lo, -3.0), np.minimum(hi, 3.0))
+    q[0:3] = rng.normal(size=3)
+    quat = rng.normal(size=4)
+    q[3:7] = quat / np.linalg.norm(quat)
+    return q
+
+
+@pytest.fixture(scope="module", params=sorted(MODELS))
+def setup(request):
+    model = MODELS[request.param]
+    kin = CasadiKinematics(model)
+    q = ca.SX.sym("q", model.nq)
+    state = kin.forward_q(q)
+    frames = list(range(1, model.nframes))
+    outs = []
+    for f in frames:
+        R, p = kin.frame_placement(state, f)
+        outs += [R, p, kin.frame_jacobian(state, f)]
+    fn = ca.Function("kin", [q], [*outs, kin.generalized_gravity(state), kin.com_world(state)])
+    return model, kin, fn, frames
+
+
+def test_frames_jacobians_gravity_match_pinocchio(setup):
+    model, _, fn, frames = setup
+    data = model.createData()
+    rng = np.random.default_rng(1234)
+    for _ in range(5):
+        q = _random_q(model, rng)
+        out = [np.array(v) for v in fn(q)]
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        for k, f in enumerate(frames):
+            R, p, J = out[3 * k], out[3 * k + 1].ravel(), out[3 * k + 2]
+            np.testing.assert_allclose(R, data.oMf[f].rotation, atol=TOL, rtol=0)
+            np.testing.assert_allclose(p, data.oMf[f].translation, atol=TOL, rtol=0)
+            Jp = pin.getFrameJacobian(model, data, f, pin.LOCAL_WORLD_ALIGNED)
+            np.testing.assert_allclose(J, Jp, atol=TOL, rtol=0, err_msg=model.frames[f].name)
+        g = pin.computeGeneralizedGravity(model, data, q)
+        np.testing.assert_allclose(out[-2].ravel(), g, atol=TOL * max(1.0, np.abs(g).max()), rtol=0)
+        np.testing.assert_allclose(out[-1].ravel(), pin.centerOfMass(model, data, q), atol=TOL)
+
+
+def test_static_terms_equal_gravity_minus_jacobian_transpose_forces(setup):
+    """joint rows of g(q) - Σ Jᵀf, and the base resultant, against Pinocchio Jacobians."""
+    model, kin, _, _ = setup
+    data = model.createData()
+    rng = np.random.default_rng(7)
+    q = _random_q(model, rng)
+    joints = [int(j) for j in rng.choice(np.arange(2, model.njoints), size=3, replace=False)]
+    pts_local = rng.normal(size=(3, 3)) * 0.1
+    forces = rng.normal(size=(3, 3)) * 100
+    qs = ca.SX.sym("q", model.nq)
+    st = kin.forward_q(qs)
+    cps = [(int(j), kin.point_world(st, int(j), pts_local[i]), ca.DM(forces[i]))
+           for i, j in enumerate(joints)]
+    F, N, tau = kin.static_wrench_terms(st, cps)
+    F, N, tau = (np.array(v).ravel() for v in ca.Function("s", [qs], [F, N, tau])(q))
+    pin.computeJointJacobians(model, data, q)
+    expected = pin.computeGeneralizedGravity(model, data, q).copy()
+    total_f = np.zeros(3)
+    for i, j in enumerate(joints):
+        M = data.oMi[j]
+        pw = M.act(pts_local[i])
+        J = pin.getJointJacobian(model, data, int(j), pin.LOCAL_WORLD_ALIGNED)
+        expected -= J[:3].T @ forces[i] + J[3:].T @ np.cross(pw - M.translation, forces[i])
+        total_f += forces[i]
+    np.testing.assert_allclose(tau, expected[6:], atol=1e-8)
+    mass = pin.computeTotalMass(model)
+    np.testing.assert_allclose(F, mass * model.gravity.linear + total_f, atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_so3_exp_series_matches_pinocchio(seed):
+    rng = np.random.default_rng(seed)
+    for w in (rng.normal(size=3), 1e-9 * rng.normal(size=3), np.zeros(3),
+              3.0 * rng.normal(size=3) / np.sqrt(3)):
+        if np.linalg.norm(w) > np.pi:
+            w = w / np.linalg.norm(w) * np.pi
+        R = np.array(ca.evalf(so3_exp(ca.DM(w))))
+        np.testing.assert_allclose(R, pin.exp3(w), atol=1e-13)
+
+
+def test_unsupported_joint_type_is_a_clear_model_error():
+    from posturegen.errors import ModelError
+
+    model = pin.Model()
+    ff = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "root")
+    model.addJoint(ff, pin.JointModelSpherical(), pin.SE3.Identity(), "ball")
+    with pytest.raises(ModelError, match="ball"):
+        CasadiKinematics(model)
