@@ -23,5 +23,7 @@ def talos():
 def shared_model(urdf: Path) -> pin.Model:
     """A free-flyer model of one of the shared URDFs; fails loudly when shared/ is missing."""
     if not urdf.is_file():
-        raise FileNotFoundError(f"{urdf} missing: tests read the paper's robots from ../shared/robots")
+        raise FileNotFoundError(
+            f"{urdf} missing: tests read the paper's robots from ../shared/robots"
+        )
     return pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())

@@ -82,8 +82,10 @@ def test_static_terms_equal_gravity_minus_jacobian_transpose_forces(setup):
     forces = rng.normal(size=(3, 3)) * 100
     qs = ca.SX.sym("q", model.nq)
     st = kin.forward_q(qs)
-    cps = [(int(j), kin.point_world(st, int(j), pts_local[i]), ca.DM(forces[i]))
-           for i, j in enumerate(joints)]
+    cps = [
+        (int(j), kin.point_world(st, int(j), pts_local[i]), ca.DM(forces[i]))
+        for i, j in enumerate(joints)
+    ]
     F, N, tau = kin.static_wrench_terms(st, cps)
     F, N, tau = (np.array(v).ravel() for v in ca.Function("s", [qs], [F, N, tau])(q))
     pin.computeJointJacobians(model, data, q)
@@ -103,8 +105,12 @@ def test_static_terms_equal_gravity_minus_jacobian_transpose_forces(setup):
 @pytest.mark.parametrize("seed", range(5))
 def test_so3_exp_series_matches_pinocchio(seed):
     rng = np.random.default_rng(seed)
-    for w in (rng.normal(size=3), 1e-9 * rng.normal(size=3), np.zeros(3),
-              3.0 * rng.normal(size=3) / np.sqrt(3)):
+    for w in (
+        rng.normal(size=3),
+        1e-9 * rng.normal(size=3),
+        np.zeros(3),
+        3.0 * rng.normal(size=3) / np.sqrt(3),
+    ):
         if np.linalg.norm(w) > np.pi:
             w = w / np.linalg.norm(w) * np.pi
         R = np.array(ca.evalf(so3_exp(ca.DM(w))))

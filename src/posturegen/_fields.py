@@ -15,7 +15,9 @@ from .errors import InputError
 def require_mapping(value: Any, field: str) -> Mapping[str, Any]:
     """The value must be a mapping (YAML dict)."""
     if not isinstance(value, Mapping):
-        raise InputError(field, f"expected a mapping, got {type(value).__name__}", "write key: value")
+        raise InputError(
+            field, f"expected a mapping, got {type(value).__name__}", "write key: value"
+        )
     return value
 
 
@@ -35,7 +37,9 @@ def check_keys(
             )
 
 
-def number(value: Any, field: str, *, minimum: float | None = None, positive: bool = False) -> float:
+def number(
+    value: Any, field: str, *, minimum: float | None = None, positive: bool = False
+) -> float:
     """A finite real number, optionally >= minimum or > 0."""
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise InputError(field, f"expected a number, got {value!r}", "write a finite number")
@@ -54,7 +58,9 @@ def vector(value: Any, n: int, field: str) -> np.ndarray:
     if isinstance(value, np.ndarray):
         value = value.tolist()
     if not isinstance(value, list | tuple):
-        raise InputError(field, f"expected a list of {n} numbers, got {value!r}", f"write [{n} numbers]")
+        raise InputError(
+            field, f"expected a list of {n} numbers, got {value!r}", f"write [{n} numbers]"
+        )
     if len(value) != n:
         raise InputError(field, f"expected {n} numbers, got {len(value)}", f"write [{n} numbers]")
     return np.array([number(v, f"{field}[{i}]") for i, v in enumerate(value)])

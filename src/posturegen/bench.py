@@ -68,9 +68,14 @@ def _reachable_target(rng: np.random.Generator, centre: np.ndarray, yaw: float) 
     model = robot.model
     data = model.createData()
     q = robot.q_init.copy()
-    for name, lo, hi in (("torso_1_joint", -0.5, 0.5), ("torso_2_joint", -0.1, 0.5),
-                         ("arm_right_1_joint", -1.2, 0.6), ("arm_right_2_joint", -1.6, -0.1),
-                         ("arm_right_3_joint", -1.0, 1.0), ("arm_right_4_joint", -2.0, -0.1)):
+    for name, lo, hi in (
+        ("torso_1_joint", -0.5, 0.5),
+        ("torso_2_joint", -0.1, 0.5),
+        ("arm_right_1_joint", -1.2, 0.6),
+        ("arm_right_2_joint", -1.6, -0.1),
+        ("arm_right_3_joint", -1.0, 1.0),
+        ("arm_right_4_joint", -2.0, -0.1),
+    ):
         jid = model.getJointId(name)
         q[model.joints[jid].idx_q] = rng.uniform(lo, hi)
     pin.framesForwardKinematics(model, data, q)
@@ -86,18 +91,32 @@ def talos_stand_reach(n: int, seed: int) -> Iterator[Problem]:
         left, right, yaw_l, yaw_r, yaw = _stance(rng)
         centre = (np.array(left) + np.array(right)) / 2
         target = _reachable_target(rng, centre, yaw)
-        yield problem_from_dict({
-            "robot": "talos",
-            "surfaces": [{"name": "ground", "vertices": [[-2, -2], [2, -2], [2, 2], [-2, 2]]}],
-            "contacts": [
-                {"robot_patch": "left_sole", "surface": "ground", "type": "fixed",
-                 "position": left, "yaw": yaw_l},
-                {"robot_patch": "right_sole", "surface": "ground", "type": "fixed",
-                 "position": right, "yaw": yaw_r},
-            ],
-            "tasks": [{"type": "position", "frame": "gripper_right_base_link", "target": target}],
-            "options": {"initial": _initial_at(centre, yaw)},
-        })
+        yield problem_from_dict(
+            {
+                "robot": "talos",
+                "surfaces": [{"name": "ground", "vertices": [[-2, -2], [2, -2], [2, 2], [-2, 2]]}],
+                "contacts": [
+                    {
+                        "robot_patch": "left_sole",
+                        "surface": "ground",
+                        "type": "fixed",
+                        "position": left,
+                        "yaw": yaw_l,
+                    },
+                    {
+                        "robot_patch": "right_sole",
+                        "surface": "ground",
+                        "type": "fixed",
+                        "position": right,
+                        "yaw": yaw_r,
+                    },
+                ],
+                "tasks": [
+                    {"type": "position", "frame": "gripper_right_base_link", "target": target}
+                ],
+                "options": {"initial": _initial_at(centre, yaw)},
+            }
+        )
 
 
 def _initial_at(centre: np.ndarray, yaw: float) -> list[float]:

@@ -36,8 +36,10 @@ def _solve_to(problem_path: Path, out: Path, quiet: bool = False) -> int:
     path = result.write(out / "posture.json")
     if not quiet:
         state = "verified posture" if result.success else "NO POSTURE"
-        print(f"{state}: {result.message}; IPOPT {result.status}, {result.iterations} iterations, "
-              f"{1e3 * result.solve_time_s:.1f} ms (+{1e3 * result.build_time_s:.0f} ms build)")
+        print(
+            f"{state}: {result.message}; IPOPT {result.status}, {result.iterations} iterations, "
+            f"{1e3 * result.solve_time_s:.1f} ms (+{1e3 * result.build_time_s:.0f} ms build)"
+        )
         print(f"wrote {path}")
     return EXIT_OK if result.success else EXIT_NOT_FOUND
 
@@ -83,7 +85,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
     names = args.family or list(FAMILIES)
     for name in names:
         if name not in FAMILIES:
-            raise PosturegenError(f"--family: unknown family '{name}' (known: {', '.join(FAMILIES)})")
+            raise PosturegenError(
+                f"--family: unknown family '{name}' (known: {', '.join(FAMILIES)})"
+            )
     reports = []
     for name in names:
         rep = run_family(name, args.n, args.seed)

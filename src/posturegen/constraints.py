@@ -45,12 +45,17 @@ class ConfigurationTerm(Term):
     def initial_guess(self, problem: Problem) -> dict[str, np.ndarray]:
         q = problem.q_init
         lo, hi = problem.robot.q_lower, problem.robot.q_upper
-        return {"base.position": q[0:3], "base.rotation": np.zeros(3), "joints": np.clip(q[7:], lo, hi)}
+        return {
+            "base.position": q[0:3],
+            "base.rotation": np.zeros(3),
+            "joints": np.clip(q[7:], lo, hi),
+        }
 
 
 class StaticEquilibrium(Term):
     """τ + Jᵀf = g(q): six base rows (zero resultant wrench, world frame, scaled by the weight)
-    and |τ_j| <= effort_j for the actuated joints, τ = g_j(q) - (Jᵀf)_j."""
+    and |τ_j| <= s·effort_j for the actuated joints, τ = g_j(q) - (Jᵀf)_j, s the problem's
+    ``torque_limit_scale`` (1 by default; < 1 keeps a safety margin)."""
 
     name = "equilibrium"
 
@@ -67,13 +72,19 @@ class StaticEquilibrium(Term):
         nlp.constrain("equilibrium.moment", (N - ca.cross(p_ref, F)) / W, 0.0, 0.0)
         finite = np.flatnonzero(np.isfinite(robot.effort_limit))
         if finite.size:
+            scale = nlp.parameter("equilibrium.torque_limit_scale", 1)
             scaled = ca.vertcat(*[tau[i] / robot.effort_limit[i] for i in finite])
-            nlp.constrain("torque_limits", scaled, -1.0, 1.0)
+            nlp.constrain(
+                "torque_limits", ca.vertcat(scaled - scale, -scaled - scale), -np.inf, 0.0
+            )
         nlp.output("torques", tau)
         ctx.torques = tau
 
     def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
-        return {"equilibrium.reference_point": problem.q_init[0:3]}
+        return {
+            "equilibrium.reference_point": problem.q_init[0:3],
+            "equilibrium.torque_limit_scale": np.array([problem.torque_limit_scale]),
+        }
 
 
 @dataclass

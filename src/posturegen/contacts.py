@@ -31,7 +31,10 @@ def patch_in_surface(position: np.ndarray, yaw: float) -> pin.SE3:
 def polygon_in_surface(patch: Patch, T_surface_patch: pin.SE3) -> ConvexPolygon:
     """The robot patch's polygon expressed in the surface plane (2-D)."""
     v = patch.polygon.vertices
-    pts = np.column_stack([v, np.zeros(len(v))]) @ T_surface_patch.rotation.T + T_surface_patch.translation
+    pts = (
+        np.column_stack([v, np.zeros(len(v))]) @ T_surface_patch.rotation.T
+        + T_surface_patch.translation
+    )
     return ConvexPolygon(pts[:, :2])
 
 
@@ -50,7 +53,9 @@ class FrictionModel:
         rows = []
         for k in range(self.faces):
             th = 2 * np.pi * k / self.faces
-            rows.append(np.cos(th) * phi[0] + np.sin(th) * phi[1] - mu * np.cos(np.pi / self.faces) * phi[2])
+            rows.append(
+                np.cos(th) * phi[0] + np.sin(th) * phi[1] - mu * np.cos(np.pi / self.faces) * phi[2]
+            )
         return ca.vertcat(*rows)
 
 
@@ -112,7 +117,9 @@ class FixedContact(Contact):
         # force points: the intersection's vertices, in the parent joint frame of the patch
         pts_s = np.column_stack([area.vertices, np.zeros(area.n)])
         T_joint_surface = self.patch.T_joint_patch * self.T_surface_patch.inverse()
-        self.points_joint = pts_s @ T_joint_surface.rotation.T + T_joint_surface.translation  # (k, 3)
+        self.points_joint = (
+            pts_s @ T_joint_surface.rotation.T + T_joint_surface.translation
+        )  # (k, 3)
         self.T_world_target = self.surface.T_world_surface * self.T_surface_patch
 
     @property

@@ -29,8 +29,12 @@ class PostureCost(Term):
         weight = nlp.parameter("posture.weight", 1)
         nlp.minimize(
             self.name,
-            weight * (ca.sumsqr(ctx.joints - qj0) + ca.sumsqr(ctx.base_position - p0) / 0.01
-                      + ca.sumsqr(w)),
+            weight
+            * (
+                ca.sumsqr(ctx.joints - qj0)
+                + ca.sumsqr(ctx.base_position - p0) / 0.01
+                + ca.sumsqr(w)
+            ),
         )
 
     def parameters(self, problem: Problem) -> dict[str, np.ndarray]:

@@ -114,7 +114,9 @@ class CasadiKinematics:
         self.nq = model.nq
         self.nv = model.nv
         self.nj = model.nv - 6  # actuated coordinates
-        universe = _JointInfo(-1, np.eye(3), np.zeros(3), "universe", np.zeros(3), -1, 0.0, np.zeros(3))
+        universe = _JointInfo(
+            -1, np.eye(3), np.zeros(3), "universe", np.zeros(3), -1, 0.0, np.zeros(3)
+        )
         infos: list[_JointInfo] = [universe]
         for i in range(1, model.njoints):
             jm = model.joints[i]

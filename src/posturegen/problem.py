@@ -40,7 +40,11 @@ class NLP:
         if name in self.x:
             raise SolveError(f"variable block '{name}' declared twice")
         sym = ca.SX.sym(name, n)
-        self.x[name] = (sym, np.broadcast_to(lb, (n,)).astype(float), np.broadcast_to(ub, (n,)).astype(float))
+        self.x[name] = (
+            sym,
+            np.broadcast_to(lb, (n,)).astype(float),
+            np.broadcast_to(ub, (n,)).astype(float),
+        )
         return sym
 
     def parameter(self, name: str, n: int) -> ca.SX:
@@ -56,7 +60,11 @@ class NLP:
             raise SolveError(f"constraint block '{name}' declared twice")
         expr = ca.vec(ca.SX(expr))
         n = expr.shape[0]
-        self.g[name] = (expr, np.broadcast_to(lb, (n,)).astype(float), np.broadcast_to(ub, (n,)).astype(float))
+        self.g[name] = (
+            expr,
+            np.broadcast_to(lb, (n,)).astype(float),
+            np.broadcast_to(ub, (n,)).astype(float),
+        )
 
     def minimize(self, name: str, expr: ca.SX) -> None:
         """Add a scalar term to the cost."""
@@ -187,6 +195,7 @@ class Problem:
     costs: list[Term]
     q_init: np.ndarray  # (nq,) initial posture: warm start and posture-cost reference
     self_collision: bool = False
+    torque_limit_scale: float = 1.0  # |τ_j| <= scale·effort_j
     solver_options: SolverOptions = field(default_factory=SolverOptions)
 
     def terms(self) -> list[Term]:
@@ -216,12 +225,17 @@ class Problem:
         p = ca.vertcat(*nlp.p.values()) if nlp.p else ca.SX(0, 1)
         g = ca.vertcat(*[v[0] for v in nlp.g.values()])
         cost = sum(nlp.costs.values()) if nlp.costs else ca.SX(0)
-        solver = ca.nlpsol("posture", "ipopt", {"x": x, "p": p, "f": cost, "g": g},
-                           self.solver_options.ipopt())
+        solver = ca.nlpsol(
+            "posture", "ipopt", {"x": x, "p": p, "f": cost, "g": g}, self.solver_options.ipopt()
+        )
         names = list(nlp.outputs)
-        outputs = ca.Function("outputs", [x, p], [nlp.outputs[n] for n in names] +
-                              [nlp.costs[n] for n in nlp.costs], ["x", "p"],
-                              names + [f"cost.{n}" for n in nlp.costs])
+        outputs = ca.Function(
+            "outputs",
+            [x, p],
+            [nlp.outputs[n] for n in names] + [nlp.costs[n] for n in nlp.costs],
+            ["x", "p"],
+            names + [f"cost.{n}" for n in nlp.costs],
+        )
         compiled = CompiledNLP(
             key=key,
             solver=solver,
@@ -256,8 +270,10 @@ class Problem:
     def summary(self) -> str:
         """Human-readable sizes of the program: variable and constraint blocks, cost terms."""
         c = self.compile()
-        lines = [f"robot {self.robot.name}: nq={self.robot.model.nq}, nv={self.robot.model.nv}",
-                 f"variables: {c.n_x}"]
+        lines = [
+            f"robot {self.robot.name}: nq={self.robot.model.nq}, nv={self.robot.model.nv}",
+            f"variables: {c.n_x}",
+        ]
         lines += [f"  {n}: {s.stop - s.start}" for n, s in c.x_index.items()]
         lines.append(f"constraints: {c.n_g}")
         lines += [f"  {n}: {s.stop - s.start}" for n, s in c.g_index.items()]

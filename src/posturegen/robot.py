@@ -31,7 +31,9 @@ def example_robot_data_dir() -> Path:
     try:
         dist = importlib.metadata.distribution("example-robot-data")
     except importlib.metadata.PackageNotFoundError as exc:  # pragma: no cover - install issue
-        raise ModelError("example-robot-data is not installed (pip install example-robot-data)") from exc
+        raise ModelError(
+            "example-robot-data is not installed (pip install example-robot-data)"
+        ) from exc
     root = Path(str(dist.locate_file("cmeel.prefix/share/example-robot-data/robots")))
     if not root.is_dir():  # pragma: no cover - install issue
         raise ModelError(f"example-robot-data has no robots folder at {root}")
@@ -91,31 +93,45 @@ class Robot:
     def frame_id(self, name: str, field_name: str = "frame") -> int:
         """Pinocchio frame id, or an InputError naming the field."""
         if not self.model.existFrame(name):
-            raise InputError(field_name, f"robot '{self.name}' has no frame '{name}'",
-                             "use a link or frame name of the URDF")
+            raise InputError(
+                field_name,
+                f"robot '{self.name}' has no frame '{name}'",
+                "use a link or frame name of the URDF",
+            )
         return int(self.model.getFrameId(name))
 
     def patch(self, name: str, field_name: str = "robot_patch") -> Patch:
         """A named patch, or an InputError listing the known ones."""
         if name not in self.patches:
-            raise InputError(field_name, f"robot '{self.name}' has no patch '{name}'",
-                             f"known patches: {', '.join(sorted(self.patches)) or 'none'}")
+            raise InputError(
+                field_name,
+                f"robot '{self.name}' has no patch '{name}'",
+                f"known patches: {', '.join(sorted(self.patches)) or 'none'}",
+            )
         return self.patches[name]
 
-    def initial_configuration(self, initial: Any = None, field_name: str = "options.initial") -> np.ndarray:
+    def initial_configuration(
+        self, initial: Any = None, field_name: str = "options.initial"
+    ) -> np.ndarray:
         """q (nq,) from a reference-configuration name, an explicit list, or the default."""
         if initial is None:
             return self.q_init.copy()
         if isinstance(initial, str):
             if initial not in self.reference_configurations:
                 known = ", ".join(sorted(self.reference_configurations)) or "none"
-                raise InputError(field_name, f"unknown reference posture '{initial}'",
-                                 f"known: {known}, or give the {self.model.nq} numbers of q")
+                raise InputError(
+                    field_name,
+                    f"unknown reference posture '{initial}'",
+                    f"known: {known}, or give the {self.model.nq} numbers of q",
+                )
             return self.reference_configurations[initial].copy()
         q = F.vector(initial, self.model.nq, field_name)
         if abs(np.linalg.norm(q[3:7]) - 1.0) > 1e-6:
-            raise InputError(field_name, "the base quaternion q[3:7] is not unit",
-                             "give a unit quaternion (x, y, z, w)")
+            raise InputError(
+                field_name,
+                "the base quaternion q[3:7] is not unit",
+                "give a unit quaternion (x, y, z, w)",
+            )
         return q
 
     def collision_model(self) -> pin.GeometryModel:
@@ -123,7 +139,9 @@ class Robot:
         if self._collision_model is None:
             try:
                 self._collision_model = pin.buildGeomFromUrdf(
-                    self.model, str(self.urdf), pin.GeometryType.COLLISION,
+                    self.model,
+                    str(self.urdf),
+                    pin.GeometryType.COLLISION,
                     package_dirs=[str(p) for p in self.package_dirs],
                 )
             except ValueError as exc:
@@ -149,13 +167,20 @@ def _load_patches(model: pin.Model, data: Any, field_name: str) -> dict[str, Pat
         F.check_keys(spec, fld, ["frame", "vertices"], ["position", "rpy"])
         frame = F.string(spec["frame"], f"{fld}.frame")
         if not model.existFrame(frame):
-            raise InputError(f"{fld}.frame", f"the model has no frame '{frame}'",
-                             "use a link or frame name of the URDF")
+            raise InputError(
+                f"{fld}.frame",
+                f"the model has no frame '{frame}'",
+                "use a link or frame name of the URDF",
+            )
         fid = int(model.getFrameId(frame))
         T = F.placement(spec.get("position", [0, 0, 0]), spec.get("rpy", [0, 0, 0]), fld)
-        poly = ConvexPolygon(F.points2d(spec["vertices"], f"{fld}.vertices"), field=f"{fld}.vertices")
+        poly = ConvexPolygon(
+            F.points2d(spec["vertices"], f"{fld}.vertices"), field=f"{fld}.vertices"
+        )
         f = model.frames[fid]
-        patches[str(name)] = Patch(str(name), frame, fid, int(f.parentJoint), T, f.placement * T, poly)
+        patches[str(name)] = Patch(
+            str(name), frame, fid, int(f.parentJoint), T, f.placement * T, poly
+        )
     return patches
 
 
@@ -164,13 +189,19 @@ def read_patch_file(path: Path) -> dict[str, Any]:
     try:
         text = path.read_text()
     except OSError as exc:
-        raise InputError("robot.patches", f"cannot read {path}: {exc.strerror}",
-                         "give the path of an existing patch YAML file") from exc
+        raise InputError(
+            "robot.patches",
+            f"cannot read {path}: {exc.strerror}",
+            "give the path of an existing patch YAML file",
+        ) from exc
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        raise InputError("robot.patches", f"{path} is not valid YAML ({exc.__class__.__name__})",
-                         "fix the YAML syntax") from exc
+        raise InputError(
+            "robot.patches",
+            f"{path} is not valid YAML ({exc.__class__.__name__})",
+            "fix the YAML syntax",
+        ) from exc
     return dict(F.require_mapping(data, "robot.patches"))
 
 
@@ -194,7 +225,9 @@ def build_robot(
     try:
         model = pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
     except (ValueError, RuntimeError) as exc:
-        raise InputError("robot.urdf", f"Pinocchio cannot parse {urdf}: {exc}", "fix the URDF") from exc
+        raise InputError(
+            "robot.urdf", f"Pinocchio cannot parse {urdf}: {exc}", "fix the URDF"
+        ) from exc
     refs: dict[str, np.ndarray] = {}
     if srdf is not None:
         try:
@@ -216,8 +249,11 @@ def build_robot(
 def load_bundled(name: str) -> Robot:
     """A robot shipped with posturegen, by name (models from example-robot-data)."""
     if name not in BUNDLED:
-        raise InputError("robot", f"unknown robot '{name}'",
-                         f"bundled robots: {', '.join(BUNDLED)}, or give {{urdf: PATH, ...}}")
+        raise InputError(
+            "robot",
+            f"unknown robot '{name}'",
+            f"bundled robots: {', '.join(BUNDLED)}, or give {{urdf: PATH, ...}}",
+        )
     data = read_patch_file(_bundled_patch_file(name))
     root = example_robot_data_dir()
     return build_robot(
@@ -230,12 +266,16 @@ def load_bundled(name: str) -> Robot:
 
 
 @functools.lru_cache(maxsize=8)
-def _load_custom(urdf: str, srdf: str | None, patches: str | None, package_dirs: tuple[str, ...]) -> Robot:
+def _load_custom(
+    urdf: str, srdf: str | None, patches: str | None, package_dirs: tuple[str, ...]
+) -> Robot:
     urdf_path = Path(urdf).expanduser().resolve()
     data: dict[str, Any] = {}
     if patches is not None:
         bundled = _bundled_patch_file(patches)
-        data = read_patch_file(bundled if ("/" not in patches and bundled.is_file()) else Path(patches))
+        data = read_patch_file(
+            bundled if ("/" not in patches and bundled.is_file()) else Path(patches)
+        )
     return build_robot(
         urdf_path.stem,
         urdf_path,

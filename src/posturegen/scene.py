@@ -66,8 +66,11 @@ class Scene:
     def surface(self, name: str, field_name: str = "surface") -> Surface:
         """A surface by name, or an InputError listing the known ones."""
         if name not in self.surfaces:
-            raise InputError(field_name, f"no surface named '{name}'",
-                             f"known surfaces: {', '.join(sorted(self.surfaces)) or 'none'}")
+            raise InputError(
+                field_name,
+                f"no surface named '{name}'",
+                f"known surfaces: {', '.join(sorted(self.surfaces)) or 'none'}",
+            )
         return self.surfaces[name]
 
     @staticmethod
@@ -82,9 +85,13 @@ class Scene:
             F.check_keys(s, fld, ["name", "vertices"], ["position", "rpy"])
             name = F.string(s["name"], f"{fld}.name")
             if name in out:
-                raise InputError(f"{fld}.name", f"duplicate surface name '{name}'", "use unique names")
+                raise InputError(
+                    f"{fld}.name", f"duplicate surface name '{name}'", "use unique names"
+                )
             T = F.placement(s.get("position", [0, 0, 0]), s.get("rpy", [0, 0, 0]), fld)
-            poly = ConvexPolygon(F.points2d(s["vertices"], f"{fld}.vertices"), field=f"{fld}.vertices")
+            poly = ConvexPolygon(
+                F.points2d(s["vertices"], f"{fld}.vertices"), field=f"{fld}.vertices"
+            )
             out[name] = Surface(name, T, poly)
         obs: list[Obstacle] = []
         if not isinstance(obstacles, list):
@@ -95,7 +102,14 @@ class Scene:
             F.check_keys(o, fld, ["name", "box"], ["position", "rpy"])
             size = F.vector(o["box"], 3, f"{fld}.box")
             if np.any(size <= 0):
-                raise InputError(f"{fld}.box", "box sizes must be positive", "write [sx, sy, sz] > 0")
-            obs.append(Obstacle(F.string(o["name"], f"{fld}.name"), size,
-                                F.placement(o.get("position", [0, 0, 0]), o.get("rpy", [0, 0, 0]), fld)))
+                raise InputError(
+                    f"{fld}.box", "box sizes must be positive", "write [sx, sy, sz] > 0"
+                )
+            obs.append(
+                Obstacle(
+                    F.string(o["name"], f"{fld}.name"),
+                    size,
+                    F.placement(o.get("position", [0, 0, 0]), o.get("rpy", [0, 0, 0]), fld),
+                )
+            )
         return Scene(out, tuple(obs))

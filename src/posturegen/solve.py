@@ -17,6 +17,7 @@ import pinocchio as pin
 
 from .problem import Problem
 from .verify import SCHEMA, VerifyReport, verify_posture
+
 _IPOPT_OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
 
 
@@ -67,8 +68,9 @@ def solve(problem: Problem, x0: np.ndarray | None = None) -> Result:
     if x0 is not None:
         x_init = np.asarray(x0, dtype=float)
     t0 = time.perf_counter()
-    sol = compiled.solver(x0=x_init, p=p, lbx=compiled.lbx, ubx=compiled.ubx,
-                          lbg=compiled.lbg, ubg=compiled.ubg)
+    sol = compiled.solver(
+        x0=x_init, p=p, lbx=compiled.lbx, ubx=compiled.ubx, lbg=compiled.lbg, ubg=compiled.ubg
+    )
     wall = time.perf_counter() - t0
     stats = compiled.solver.stats()
     status = str(stats.get("return_status", "unknown"))
@@ -88,20 +90,27 @@ def solve(problem: Problem, x0: np.ndarray | None = None) -> Result:
         message = f"IPOPT did not converge ({status})"
     else:
         message = "IPOPT converged but the re-check failed: " + "; ".join(
-            f"{c.name} {c.value:.3g} > {c.tolerance:.1g}" for c in report.failures)
-    posture.update({
-        "success": success,
-        "status": status,
-        "message": message,
-        "iterations": int(stats.get("iter_count", -1)),
-        "solve_time_s": solve_time,
-        "max_violation": report.max_violation,
-        "checks": {c.name: {"value": c.value, "tolerance": c.tolerance, "ok": c.ok}
-                   for c in report.checks},
-    })
+            f"{c.name} {c.value:.3g} > {c.tolerance:.1g}" for c in report.failures
+        )
+    posture.update(
+        {
+            "success": success,
+            "status": status,
+            "message": message,
+            "iterations": int(stats.get("iter_count", -1)),
+            "solve_time_s": solve_time,
+            "max_violation": report.max_violation,
+            "checks": {
+                c.name: {"value": c.value, "tolerance": c.tolerance, "ok": c.ok}
+                for c in report.checks
+            },
+        }
+    )
     forces = {
-        c["name"]: tuple(ContactForce(f["frame"], np.array(f["point"]), np.array(f["force"]))
-                         for f in c["forces"])
+        c["name"]: tuple(
+            ContactForce(f["frame"], np.array(f["point"]), np.array(f["force"]))
+            for f in c["forces"]
+        )
         for c in posture["contacts"]
     }
     return Result(
@@ -136,19 +145,22 @@ def configuration_from_x(problem: Problem, compiled: Any, x: np.ndarray) -> np.n
     return np.concatenate([p, quat, qj])
 
 
-def posture_dict(problem: Problem, q: np.ndarray, torques: np.ndarray,
-                 outputs: dict[str, np.ndarray]) -> dict[str, Any]:
+def posture_dict(
+    problem: Problem, q: np.ndarray, torques: np.ndarray, outputs: dict[str, np.ndarray]
+) -> dict[str, Any]:
     """The posture-file content (schema posturegen.posture/1) without the solver fields."""
     robot = problem.robot
     tasks = []
     for t in problem.tasks:
-        tasks.append({
-            "type": "position",
-            "frame": t.frame,
-            "target": np.asarray(t.target).tolist(),
-            "rotation": None if t.R_target is None else np.asarray(t.R_target).tolist(),
-            "weight": t.weight,
-        })
+        tasks.append(
+            {
+                "type": "position",
+                "frame": t.frame,
+                "target": np.asarray(t.target).tolist(),
+                "rotation": None if t.R_target is None else np.asarray(t.R_target).tolist(),
+                "weight": t.weight,
+            }
+        )
     return {
         "schema": SCHEMA,
         "robot": robot.to_dict(),
@@ -160,4 +172,5 @@ def posture_dict(problem: Problem, q: np.ndarray, torques: np.ndarray,
         "tasks": tasks,
         "obstacles": [o.to_dict() for o in problem.scene.obstacles],
         "self_collision": problem.self_collision,
+        "torque_limit_scale": problem.torque_limit_scale,
     }

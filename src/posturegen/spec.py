@@ -23,8 +23,17 @@ from .scene import Scene
 
 CONTACT_TYPES = ("fixed",)
 _TOP_REQUIRED = ("robot", "contacts")
-_TOP_OPTIONAL = ("mu", "surfaces", "obstacles", "tasks", "options", "costs", "friction", "name",
-                 "description")
+_TOP_OPTIONAL = (
+    "mu",
+    "surfaces",
+    "obstacles",
+    "tasks",
+    "options",
+    "costs",
+    "friction",
+    "name",
+    "description",
+)
 
 
 def read_yaml(path: str | Path) -> Any:
@@ -59,35 +68,46 @@ def _friction(value: Any, field: str) -> FrictionModel:
     F.check_keys(v, field, ["model"], ["faces"])
     kind = F.string(v["model"], f"{field}.model")
     if kind not in ("pyramid", "cone"):
-        raise InputError(f"{field}.model", f"unknown friction model '{kind}'", "use pyramid or cone")
+        raise InputError(
+            f"{field}.model", f"unknown friction model '{kind}'", "use pyramid or cone"
+        )
     faces = v.get("faces", 4)
     if isinstance(faces, bool) or not isinstance(faces, int) or faces < 3:
         raise InputError(f"{field}.faces", f"expected an integer >= 3, got {faces!r}", "use 4 or 8")
     return FrictionModel(kind, faces)
 
 
-def _contact(c: Any, i: int, robot: Robot, scene: Scene, mu: float,
-             friction: FrictionModel, names: set[str]) -> FixedContact:
+def _contact(
+    c: Any, i: int, robot: Robot, scene: Scene, mu: float, friction: FrictionModel, names: set[str]
+) -> FixedContact:
     fld = f"contacts[{i}]"
     c = F.require_mapping(c, fld)
-    F.check_keys(c, fld, ["robot_patch", "surface", "type"],
-                 ["position", "yaw", "mu", "name", "friction"])
+    F.check_keys(
+        c, fld, ["robot_patch", "surface", "type"], ["position", "yaw", "mu", "name", "friction"]
+    )
     ctype = F.string(c["type"], f"{fld}.type")
     if ctype not in CONTACT_TYPES:
-        raise InputError(f"{fld}.type", f"unknown contact type '{ctype}'",
-                         f"use one of: {', '.join(CONTACT_TYPES)}")
+        raise InputError(
+            f"{fld}.type",
+            f"unknown contact type '{ctype}'",
+            f"use one of: {', '.join(CONTACT_TYPES)}",
+        )
     patch = robot.patch(F.string(c["robot_patch"], f"{fld}.robot_patch"), f"{fld}.robot_patch")
     surface = scene.surface(F.string(c["surface"], f"{fld}.surface"), f"{fld}.surface")
     name = F.string(c.get("name", patch.name), f"{fld}.name")
     if name in names:
-        raise InputError(f"{fld}.name", f"two contacts are named '{name}'",
-                         "give each contact a unique name")
+        raise InputError(
+            f"{fld}.name", f"two contacts are named '{name}'", "give each contact a unique name"
+        )
     names.add(name)
     mu_c = F.number(c.get("mu", mu), f"{fld}.mu", minimum=0.0)
     fric = _friction(c["friction"], f"{fld}.friction") if "friction" in c else friction
     if "position" not in c:
-        raise InputError(f"{fld}.position", "missing for a fixed contact",
-                         "add position: [x, y] in the surface frame")
+        raise InputError(
+            f"{fld}.position",
+            "missing for a fixed contact",
+            "add position: [x, y] in the surface frame",
+        )
     pos = F.vector(c["position"], 2, f"{fld}.position")
     yaw = F.number(c.get("yaw", 0.0), f"{fld}.yaw")
     try:
@@ -108,7 +128,11 @@ def _task(t: Any, i: int, robot: Robot) -> PositionTask:
     R = None
     if t.get("rpy") is not None:
         R = pin.rpy.rpyToMatrix(*F.vector(t["rpy"], 3, f"{fld}.rpy"))
-    weight = F.number(t["weight"], f"{fld}.weight", positive=True) if t.get("weight") is not None else None
+    weight = (
+        F.number(t["weight"], f"{fld}.weight", positive=True)
+        if t.get("weight") is not None
+        else None
+    )
     return PositionTask(frame, fid, target, R, weight, index=i)
 
 
@@ -128,15 +152,22 @@ def _solver_options(value: Any) -> SolverOptions:
     base = SolverOptions()
     max_iter = v.get("max_iter", base.max_iter)
     if isinstance(max_iter, bool) or not isinstance(max_iter, int) or max_iter < 1:
-        raise InputError("options.solver.max_iter", f"expected a positive integer, got {max_iter!r}",
-                         "write e.g. 200")
+        raise InputError(
+            "options.solver.max_iter",
+            f"expected a positive integer, got {max_iter!r}",
+            "write e.g. 200",
+        )
     return SolverOptions(
         tol=F.number(v.get("tol", base.tol), "options.solver.tol", positive=True),
         max_iter=max_iter,
-        max_cpu_time=F.number(v.get("max_cpu_time", base.max_cpu_time),
-                              "options.solver.max_cpu_time", positive=True),
-        print_level=int(F.number(v.get("print_level", base.print_level), "options.solver.print_level",
-                                 minimum=0)),
+        max_cpu_time=F.number(
+            v.get("max_cpu_time", base.max_cpu_time), "options.solver.max_cpu_time", positive=True
+        ),
+        print_level=int(
+            F.number(
+                v.get("print_level", base.print_level), "options.solver.print_level", minimum=0
+            )
+        ),
     )
 
 
@@ -152,21 +183,43 @@ def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
     if not isinstance(contacts_raw, list) or not contacts_raw:
         raise InputError("contacts", "expected a non-empty list", "add at least one contact")
     names: set[str] = set()
-    contacts = [_contact(c, i, robot, scene, mu, friction, names) for i, c in enumerate(contacts_raw)]
+    contacts = [
+        _contact(c, i, robot, scene, mu, friction, names) for i, c in enumerate(contacts_raw)
+    ]
     tasks_raw = data.get("tasks", []) or []
     if not isinstance(tasks_raw, list):
         raise InputError("tasks", "expected a list", "write tasks: [{type: position, ...}]")
     tasks: list[Term] = [_task(t, i, robot) for i, t in enumerate(tasks_raw)]
     options = F.require_mapping(data.get("options", {}) or {}, "options")
-    F.check_keys(options, "options", [], ["initial", "self_collision", "solver"])
+    F.check_keys(
+        options, "options", [], ["initial", "self_collision", "solver", "torque_limit_scale"]
+    )
+    torque_scale = F.number(
+        options.get("torque_limit_scale", 1.0), "options.torque_limit_scale", positive=True
+    )
     q_init = robot.initial_configuration(options.get("initial"), "options.initial")
     self_collision = options.get("self_collision", False)
     if not isinstance(self_collision, bool):
-        raise InputError("options.self_collision", f"expected true or false, got {self_collision!r}",
-                         "write true or false")
+        raise InputError(
+            "options.self_collision",
+            f"expected true or false, got {self_collision!r}",
+            "write true or false",
+        )
     if self_collision:
-        raise InputError("options.self_collision", "collision avoidance is not available yet",
-                         "set self_collision: false")
+        raise InputError(
+            "options.self_collision",
+            "collision avoidance is not available yet",
+            "set self_collision: false",
+        )
     solver = _solver_options(options.get("solver", {}) or {})
-    return Problem(robot, scene, contacts, tasks, _costs(data.get("costs")), np.asarray(q_init),
-                   self_collision, solver)
+    return Problem(
+        robot,
+        scene,
+        contacts,
+        tasks,
+        _costs(data.get("costs")),
+        np.asarray(q_init),
+        self_collision,
+        torque_scale,
+        solver,
+    )

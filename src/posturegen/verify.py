@@ -98,14 +98,21 @@ def verify_posture(posture: dict[str, Any], model: pin.Model) -> VerifyReport:
     lo, hi = model.lowerPositionLimit[7:], model.upperPositionLimit[7:]
     excess = np.maximum(lo - q[7:], q[7:] - hi)
     worst = int(np.argmax(excess)) if excess.size else 0
-    checks.append(Check("joint limits", float(max(excess.max(initial=0.0), 0.0)), TOL_JOINT,
-                        f"joint {model.names[worst + 2]}"))
+    checks.append(
+        Check(
+            "joint limits",
+            float(max(excess.max(initial=0.0), 0.0)),
+            TOL_JOINT,
+            f"joint {model.names[worst + 2]}",
+        )
+    )
     tau = np.asarray(posture["torques"], dtype=float)
     if tau.shape != (model.nv - 6,):
         return VerifyReport((*checks, Check("torques", np.inf, 0.0, f"expected {model.nv - 6}")))
     effort = np.array(model.effortLimit[6:], dtype=float)
     finite = np.isfinite(effort) & (effort > 0) & (effort < 1e10)
-    over = np.where(finite, (np.abs(tau) - effort) / np.where(finite, effort, 1.0), 0.0)
+    limit = effort * float(posture.get("torque_limit_scale", 1.0))
+    over = np.where(finite, (np.abs(tau) - limit) / np.where(finite, effort, 1.0), 0.0)
     checks.append(Check("torque limits", float(max(over.max(initial=0.0), 0.0)), TOL_TORQUE))
 
     pin.forwardKinematics(model, data, q)
@@ -125,13 +132,21 @@ def verify_posture(posture: dict[str, Any], model: pin.Model) -> VerifyReport:
         P_c = ConvexPolygon(np.array(rp["vertices"], dtype=float))
         # coplanarity with opposite normals (paper eq. 2)
         T_sc = T_ws.inverse() * T_wc
-        geo = max(geo, abs(T_sc.translation[2]), abs(T_sc.rotation[2, 0]), abs(T_sc.rotation[2, 1]),
-                  abs(T_sc.rotation[2, 2] + 1.0))
+        geo = max(
+            geo,
+            abs(T_sc.translation[2]),
+            abs(T_sc.rotation[2, 0]),
+            abs(T_sc.rotation[2, 1]),
+            abs(T_sc.rotation[2, 2] + 1.0),
+        )
         if contact.get("pose") is not None and contact["type"] == "fixed":
             pos = np.asarray(contact["pose"]["position"], dtype=float)
             yaw = float(contact["pose"]["yaw"])
-            geo = max(geo, float(np.abs(T_sc.translation[:2] - pos).max()),
-                      abs(float(np.arctan2(np.sin(_yaw(T_sc) - yaw), np.cos(_yaw(T_sc) - yaw)))))
+            geo = max(
+                geo,
+                float(np.abs(T_sc.translation[:2] - pos).max()),
+                abs(float(np.arctan2(np.sin(_yaw(T_sc) - yaw), np.cos(_yaw(T_sc) - yaw)))),
+            )
         mu = float(contact["mu"])
         for f in contact.get("forces", []):
             p_w = np.asarray(f["point"], dtype=float)
@@ -140,8 +155,11 @@ def verify_posture(posture: dict[str, Any], model: pin.Model) -> VerifyReport:
             p_s = _poly_in_plane(T_ws, p_w[None])[0]
             p_c = _poly_in_plane(T_wc, p_w[None])[0]
             geo = max(geo, abs(p_s[2]))
-            inside = max(inside, float(-P_s.distance_inside(p_s[None, :2])[0]),
-                         float(-P_c.distance_inside(p_c[None, :2])[0]))
+            inside = max(
+                inside,
+                float(-P_s.distance_inside(p_s[None, :2])[0]),
+                float(-P_c.distance_inside(p_c[None, :2])[0]),
+            )
             n = T_ws.rotation[:, 2]
             fn = float(n @ f_w)
             ft = float(np.linalg.norm(f_w - fn * n))
@@ -159,7 +177,9 @@ def verify_posture(posture: dict[str, Any], model: pin.Model) -> VerifyReport:
     checks.append(Check("contact points inside polygons", max(inside, 0.0), TOL_GEOMETRY))
     checks.append(Check("friction cones", max(fric, 0.0), TOL_FRICTION))
     scale = np.full(model.nv, weight)
-    checks.append(Check("static equilibrium", float(np.abs(residual / scale).max()), TOL_EQUILIBRIUM))
+    checks.append(
+        Check("static equilibrium", float(np.abs(residual / scale).max()), TOL_EQUILIBRIUM)
+    )
     task_err = 0.0
     for task in posture.get("tasks", []):
         if task.get("weight") is not None:
@@ -178,8 +198,9 @@ def _yaw(T_sc: pin.SE3) -> float:
     return float(np.arctan2(T_sc.rotation[1, 0], T_sc.rotation[0, 0]))
 
 
-def _ellipse_outside(ell: dict[str, Any], T_ws: pin.SE3, P_s: ConvexPolygon, T_wc: pin.SE3,
-                     P_c: ConvexPolygon) -> float:
+def _ellipse_outside(
+    ell: dict[str, Any], T_ws: pin.SE3, P_s: ConvexPolygon, T_wc: pin.SE3, P_c: ConvexPolygon
+) -> float:
     """How far [m] the contact ellipse sticks out of either polygon (<= 0: inside both)."""
     c = np.asarray(ell["center"], dtype=float)
     a1, a2 = (np.asarray(a, dtype=float) for a in ell["axes"])
@@ -210,10 +231,13 @@ def load_posture(path: str | Path) -> dict[str, Any]:
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(str(path), "cannot read it", "check the path") from exc
     except json.JSONDecodeError as exc:
-        raise InputError(str(path), f"invalid JSON at line {exc.lineno}", "give a posture file") from exc
+        raise InputError(
+            str(path), f"invalid JSON at line {exc.lineno}", "give a posture file"
+        ) from exc
     if not isinstance(data, dict) or data.get("schema") != SCHEMA:
-        raise InputError(f"{path}: schema", f"expected \"{SCHEMA}\"",
-                         "give a file written by posturegen solve")
+        raise InputError(
+            f"{path}: schema", f'expected "{SCHEMA}"', "give a file written by posturegen solve"
+        )
     for key in ("robot", "q", "torques", "contacts"):
         if key not in data:
             raise InputError(f"{path}: {key}", "missing", "give a file written by posturegen solve")

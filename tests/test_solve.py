@@ -1,0 +1,178 @@
+"""Solving, the frozen result, solver reuse, the posture file and the independent re-check."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+from posturegen import load_problem, problem_from_dict, solve
+from posturegen.cli import _demo_dir, main
+from posturegen.verify import verify_posture
+from tests.conftest import HRP2_URDF
+
+STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
+
+
+@pytest.fixture(scope="module")
+def result():
+    return solve(load_problem(_demo_dir() / "stand-reach.yaml"))
+
+
+def test_demo_posture_is_verified(result, talos):
+    assert result.success, result.message
+    assert result.status == "Solve_Succeeded"
+    assert result.verification.ok
+    assert result.q.shape == (talos.model.nq,)
+    assert abs(np.linalg.norm(result.q[3:7]) - 1) < 1e-12
+    # both feet carry the whole weight, upward
+    total = sum(f.force for fs in result.forces.values() for f in fs)
+    np.testing.assert_allclose(total, [0, 0, talos.weight], atol=1e-6 * talos.weight)
+    assert np.all(np.abs(result.torques) <= talos.effort_limit + 1e-9)
+
+
+def test_result_is_frozen(result):
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        result.success = False  # type: ignore[misc]
+
+
+def test_solver_is_built_once_per_structure():
+    a = load_problem(_demo_dir() / "stand-reach.yaml")
+    data = copy.deepcopy(STAND)
+    data["tasks"][0]["target"] = [0.35, -0.45, 1.0]
+    data["contacts"][0]["position"] = [0.05, 0.12]
+    b = problem_from_dict(data)
+    assert a.compile() is b.compile()
+    rb = solve(b)
+    assert rb.success, rb.message
+    assert rb.build_time_s == 0.0
+    # the new target and foot pose were honoured, not the cached ones
+    assert rb.posture["tasks"][0]["target"] == [0.35, -0.45, 1.0]
+    assert rb.posture["contacts"][0]["pose"]["position"] == [0.05, 0.12]
+
+
+def test_posture_file_schema(result):
+    p = result.posture
+    for key in (
+        "schema",
+        "robot",
+        "q",
+        "torques",
+        "gravity",
+        "success",
+        "status",
+        "iterations",
+        "solve_time_s",
+        "max_violation",
+        "contacts",
+        "obstacles",
+        "self_collision",
+    ):
+        assert key in p
+    assert p["schema"] == "posturegen.posture/1"
+    c = p["contacts"][0]
+    assert set(c) >= {"name", "type", "mu", "robot_patch", "surface", "ellipse", "forces"}
+    assert np.array(c["robot_patch"]["placement"]).shape == (4, 4)
+    assert np.array(c["surface"]["placement"]).shape == (4, 4)
+    assert len(c["forces"]) == 4 and set(c["forces"][0]) == {"frame", "point", "force"}
+    json.dumps(p)  # serializable
+
+
+def _tampered(posture, edit):
+    p = copy.deepcopy(posture)
+    edit(p)
+    return p
+
+
+@pytest.mark.parametrize(
+    ("edit", "check"),
+    [
+        (lambda p: p["torques"].__setitem__(3, p["torques"][3] + 5.0), "static equilibrium"),
+        (lambda p: p["q"].__setitem__(10, p["q"][10] + 0.01), "contact geometry"),
+        (lambda p: p["q"].__setitem__(12, 10.0), "joint limits"),
+        (lambda p: p["contacts"][0]["forces"][0]["force"].__setitem__(0, 1e3), "friction cones"),
+        (
+            lambda p: p["contacts"][0]["forces"][0]["point"].__setitem__(0, 0.5),
+            "contact points inside polygons",
+        ),
+        (lambda p: p["tasks"][0].__setitem__("target", [0.5, -0.35, 0.9]), "tasks"),
+        (lambda p: p["torques"].__setitem__(0, 1e4), "torque limits"),
+    ],
+    ids=["torque", "foot-moved", "joint-limit", "friction", "point-outside", "task", "effort"],
+)
+def test_verify_rejects_tampered_postures(result, talos, edit, check):
+    report = verify_posture(_tampered(result.posture, edit), talos.model)
+    assert not report.ok
+    assert check in {c.name for c in report.failures}
+
+
+def test_cli_demo_then_verify(tmp_path, capsys):
+    assert main(["demo", "stand-reach", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "problem.yaml").is_file()
+    assert main(["verify", str(tmp_path / "posture.json")]) == 0
+    out = capsys.readouterr().out
+    assert "posture verified" in out
+    # a tampered file is rejected with exit code 1
+    data = json.loads((tmp_path / "posture.json").read_text())
+    data["torques"][5] += 3.0
+    (tmp_path / "bad.json").write_text(json.dumps(data))
+    assert main(["verify", str(tmp_path / "bad.json")]) == 1
+    assert "REJECTED" in capsys.readouterr().out
+
+
+def test_unreachable_target_is_exit_1_with_a_file(tmp_path, capsys):
+    data = copy.deepcopy(STAND)
+    data["tasks"][0]["target"] = [0.4, -0.3, 2.5]
+    path = tmp_path / "far.yaml"
+    path.write_text(yaml.safe_dump(data))
+    assert main(["solve", str(path), "--out", str(tmp_path / "out")]) == 1
+    posture = json.loads((tmp_path / "out" / "posture.json").read_text())
+    assert posture["success"] is False
+    assert posture["message"]
+
+
+def test_iteration_limit_is_never_a_success():
+    data = copy.deepcopy(STAND)
+    data["options"]["solver"] = {"max_iter": 2}
+    r = solve(problem_from_dict(data))
+    assert not r.success
+    assert r.status == "Maximum_Iterations_Exceeded"
+
+
+def test_torque_limits_bind(talos):
+    """With the limits scaled down to 40 %, the posture that was fine at 100 % must change:
+    every torque stays within the scaled limit and at least one sits on it."""
+    data = copy.deepcopy(STAND)
+    data["tasks"][0]["target"] = [0.8, -0.2, 0.5]
+    free = solve(problem_from_dict(data))
+    assert free.success, free.message
+    ratio = np.abs(free.torques) / talos.effort_limit
+    assert ratio.max() > 0.5
+    data["options"]["torque_limit_scale"] = 0.5
+    tight = solve(problem_from_dict(data))
+    assert tight.success, tight.message
+    ratio = np.abs(tight.torques) / talos.effort_limit
+    assert ratio.max() <= 0.5 * (1 + 1e-6)
+    assert ratio.max() >= 0.5 * (1 - 1e-4)
+    # the re-check uses the scaled limits too
+    bad = copy.deepcopy(tight.posture)
+    bad["torque_limit_scale"] = 0.3
+    assert "torque limits" in {c.name for c in verify_posture(bad, talos.model).failures}
+
+
+def test_custom_urdf_with_patch_file(tmp_path):
+    """HRP-2 from ../shared/robots, with its shipped patch file, standing and reaching."""
+    data = copy.deepcopy(STAND)
+    data["robot"] = {
+        "urdf": str(HRP2_URDF),
+        "srdf": str(HRP2_URDF.with_suffix(".srdf")),
+        "patches": "hrp2",
+    }
+    data["tasks"] = [{"type": "position", "frame": "r_gripper", "target": [0.35, -0.25, 0.75]}]
+    r = solve(problem_from_dict(data))
+    assert r.success, r.message
+    assert r.posture["robot"]["urdf"] == str(HRP2_URDF.resolve())
