@@ -8,6 +8,7 @@ once per structure before timing (the first solve is a warm-up and is not counte
 
 from __future__ import annotations
 
+import dataclasses
 import statistics
 import time
 from collections.abc import Callable, Iterator
@@ -135,10 +136,13 @@ FAMILIES: dict[str, tuple[str, Callable[[int, int], Iterator[Problem]]]] = {
 }
 
 
-def run_family(name: str, n: int = 100, seed: int = 0) -> FamilyReport:
+def run_family(name: str, n: int = 100, seed: int = 0, jit: bool = False) -> FamilyReport:
     """Solve n seeded problems of a family and collect statistics."""
     description, generator = FAMILIES[name]
     problems = list(generator(n + 1, seed))
+    if jit:
+        for problem in problems:
+            problem.solver_options = dataclasses.replace(problem.solver_options, jit=True)
     solve(problems[0])  # warm-up: builds the solver for this structure
     times, calls, iters, ok, failures = [], [], [], 0, []
     for i, problem in enumerate(problems[1:]):
@@ -167,7 +171,9 @@ def run_family(name: str, n: int = 100, seed: int = 0) -> FamilyReport:
     )
 
 
-def run(families: list[str] | None = None, n: int = 100, seed: int = 0) -> list[dict[str, Any]]:
+def run(
+    families: list[str] | None = None, n: int = 100, seed: int = 0, jit: bool = False
+) -> list[dict[str, Any]]:
     """Run families (all by default); return their reports as dicts."""
     names = families or list(FAMILIES)
-    return [asdict(run_family(name, n, seed)) for name in names]
+    return [asdict(run_family(name, n, seed, jit)) for name in names]

@@ -90,7 +90,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
             )
     reports = []
     for name in names:
-        rep = run_family(name, args.n, args.seed)
+        rep = run_family(name, args.n, args.seed, args.jit)
         print(rep.line(), flush=True)
         for failure in rep.failures[:5]:
             print(f"    failed {failure}")
@@ -126,6 +126,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--family", action="append", help="run only this family (repeatable)")
     p.add_argument("-n", type=int, default=100, help="problems per family (default 100)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--jit", action="store_true", help="compile the solvers to C first (needs gcc)")
     p.set_defaults(func=cmd_bench)
     return parser
 

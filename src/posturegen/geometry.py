@@ -442,6 +442,12 @@ _BUILDERS = {
 # ---------------------------------------------------------------------------------------------
 
 _R_MIN = 1e-6  # lower bound on rx, ry in normalized units (intersection of size ~1)
+# theta is only defined modulo pi (modulo pi/2 with rx <-> ry) and it is left unbounded: when the
+# normalized optimum is nearly round the theta-curvature (~ (rx - ry)^2) vanishes, IPOPT takes
+# long theta steps and any finite box (tried: [-pi, pi], th0 +- 2 pi) becomes active at a
+# spurious KKT point.  cos/sin make the problem periodic anyway; the returned angle is wrapped
+# to (-pi/2, pi/2] with rx >= ry.
+_THETA_WINDOW = math.inf
 _START = (0.95, 0.9)  # initial radii as fractions of the centroid's edge margin
 _SOLVER_CACHE: dict[tuple[str, int, int], ca.Function] = {}
 _IPOPT_OPTS: dict[str, Any] = {
@@ -528,8 +534,8 @@ def largest_inscribed_ellipse(
     sol = solver(
         x0=x0,
         p=np.concatenate([V1.ravel(), V2.ravel()]),
-        lbx=[lo[0], lo[1], -math.pi, _R_MIN, _R_MIN],
-        ubx=[hi[0], hi[1], math.pi, rmax, rmax],
+        lbx=[lo[0], lo[1], th0 - _THETA_WINDOW, _R_MIN, _R_MIN],
+        ubx=[hi[0], hi[1], th0 + _THETA_WINDOW, rmax, rmax],
         lbg=-np.inf,
         ubg=0.0,
     )

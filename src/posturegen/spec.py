@@ -148,7 +148,10 @@ def _costs(value: Any) -> list[Term]:
 
 def _solver_options(value: Any) -> SolverOptions:
     v = F.require_mapping(value, "options.solver")
-    F.check_keys(v, "options.solver", [], ["tol", "max_iter", "max_cpu_time", "print_level"])
+    F.check_keys(v, "options.solver", [], ["tol", "max_iter", "max_cpu_time", "print_level", "jit"])
+    jit = v.get("jit", False)
+    if not isinstance(jit, bool):
+        raise InputError("options.solver.jit", f"expected true or false, got {jit!r}", "write true")
     base = SolverOptions()
     max_iter = v.get("max_iter", base.max_iter)
     if isinstance(max_iter, bool) or not isinstance(max_iter, int) or max_iter < 1:
@@ -163,6 +166,7 @@ def _solver_options(value: Any) -> SolverOptions:
         max_cpu_time=F.number(
             v.get("max_cpu_time", base.max_cpu_time), "options.solver.max_cpu_time", positive=True
         ),
+        jit=jit,
         print_level=int(
             F.number(
                 v.get("print_level", base.print_level), "options.solver.print_level", minimum=0
