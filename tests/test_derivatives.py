@@ -15,7 +15,7 @@ from posturegen.spec import load_problem
 def program():
     problem = load_problem(_demo_dir() / "stand-reach.yaml")
     compiled = problem.compile()
-    x0, p = problem.numeric(compiled)
+    x0, p, _, _ = problem.numeric(compiled)
     return compiled, x0, p
 
 

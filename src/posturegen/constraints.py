@@ -72,19 +72,19 @@ class StaticEquilibrium(Term):
         nlp.constrain("equilibrium.moment", (N - ca.cross(p_ref, F)) / W, 0.0, 0.0)
         finite = np.flatnonzero(np.isfinite(robot.effort_limit))
         if finite.size:
-            scale = nlp.parameter("equilibrium.torque_limit_scale", 1)
             scaled = ca.vertcat(*[tau[i] / robot.effort_limit[i] for i in finite])
-            nlp.constrain(
-                "torque_limits", ca.vertcat(scaled - scale, -scaled - scale), -np.inf, 0.0
-            )
+            nlp.constrain("torque_limits", scaled, -1.0, 1.0)  # scaled per instance: bounds()
         nlp.output("torques", tau)
         ctx.torques = tau
 
     def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
-        return {
-            "equilibrium.reference_point": problem.q_init[0:3],
-            "equilibrium.torque_limit_scale": np.array([problem.torque_limit_scale]),
-        }
+        return {"equilibrium.reference_point": problem.q_init[0:3]}
+
+    def bounds(self, problem: Problem) -> dict[str, tuple[float, float]]:
+        if not np.any(np.isfinite(problem.robot.effort_limit)):
+            return {}
+        s = problem.torque_limit_scale
+        return {"torque_limits": (-s, s)}
 
 
 @dataclass

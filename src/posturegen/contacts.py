@@ -68,13 +68,65 @@ class Contact(Term):
     surface: Surface
     mu: float
 
-    def force_points_world(self) -> int:
-        """Number of force-bearing points (0 for geometric contacts)."""
+    def force_points_count(self) -> int:
+        """Number of force-bearing points (0 for contacts that bear no force)."""
         return 0
 
     def to_dict(self, outputs: dict[str, np.ndarray]) -> dict[str, Any]:
         """The posture file's entry for this contact, from the solution's outputs."""
         raise NotImplementedError
+
+    def _base_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "type": self.type,
+            "mu": self.mu,
+            "robot_patch": {
+                "name": self.patch.name,
+                "frame": self.patch.frame,
+                "placement": self.patch.T_frame_patch.homogeneous.tolist(),
+                "vertices": self.patch.polygon.vertices.tolist(),
+            },
+            "surface": self.surface.to_dict(),
+            "ellipse": None,
+            "forces": [],
+        }
+
+
+def declare_forces(
+    ctx: BuildContext,
+    pre: str,
+    joint_id: int,
+    points_world: list[ca.SX],
+    friction: FrictionModel,
+    Rs: ca.SX,
+) -> None:
+    """Force variables at world points attached to joint ``joint_id``: f = W·R_s·φ with φ in
+    the surface frame (φ_n >= 0), W the robot's weight, and the friction model on each φ.
+
+    Declares ``{pre}.forces`` (3k,) and the parameter ``{pre}.mu``; ``Rs`` is R_world_surface; adds
+    the forces to the equilibrium and the outputs ``{pre}.points`` and ``{pre}.forces``."""
+    nlp, k = ctx.nlp, len(points_world)
+    phi = nlp.variable(f"{pre}.forces", 3 * k, np.tile([-np.inf, -np.inf, 0.0], k), np.inf)
+    mu = nlp.parameter(f"{pre}.mu", 1)
+    W = ctx.robot.weight
+    fric, f_world = [], []
+    for i, pw in enumerate(points_world):
+        phi_i = phi[3 * i : 3 * i + 3]
+        fric.append(friction.constraints(phi_i, mu))
+        fw = W * (Rs @ phi_i)
+        ctx.force_points.append((joint_id, pw, fw))
+        f_world.append(fw)
+    nlp.constrain(f"{pre}.friction", ca.vertcat(*fric), -np.inf, 0.0)
+    nlp.output(f"{pre}.points", ca.horzcat(*points_world))
+    nlp.output(f"{pre}.forces", ca.horzcat(*f_world))
+
+
+def force_guess(problem: Problem, n_points: int) -> np.ndarray:
+    """Initial φ (3·n_points,): the weight shared evenly over every force point, along the
+    normal."""
+    total = sum(c.force_points_count() for c in problem.contacts) or 1
+    return np.tile([0.0, 0.0, 1.0 / total], n_points)
 
 
 def declare_patch_frame(ctx: BuildContext, patch: Patch) -> tuple[ca.SX, ca.SX]:
@@ -127,7 +179,7 @@ class FixedContact(Contact):
         """Number of force-bearing points."""
         return len(self.points_joint)
 
-    def force_points_world(self) -> int:
+    def force_points_count(self) -> int:
         return self.n_points
 
     def key(self) -> tuple[Any, ...]:
@@ -142,25 +194,11 @@ class FixedContact(Contact):
         E = Rt.T @ R_c
         nlp.constrain(f"{pre}.position", Rt.T @ (p_c - pt), 0.0, 0.0)
         nlp.constrain(f"{pre}.orientation", ca.vertcat(E[2, 0], E[2, 1], E[1, 0]), 0.0, 0.0)
-        # forces, scaled by the weight, in the surface frame
-        phi = nlp.variable(f"{pre}.forces", 3 * k, np.tile([-np.inf, -np.inf, 0.0], k), np.inf)
-        Rs = ca.reshape(nlp.parameter(f"{pre}.R_surface", 9), 3, 3)
-        mu = nlp.parameter(f"{pre}.mu", 1)
         pts = ca.reshape(nlp.parameter(f"{pre}.points_joint", 3 * k), 3, k)
-        W = ctx.robot.weight
         R_j, p_j = ctx.state.R[self.patch.joint_id], ctx.state.p[self.patch.joint_id]
-        fric, p_world, f_world = [], [], []
-        for i in range(k):
-            phi_i = phi[3 * i : 3 * i + 3]
-            fric.append(self.friction.constraints(phi_i, mu))
-            pw = p_j + R_j @ pts[:, i]
-            fw = W * (Rs @ phi_i)
-            ctx.force_points.append((self.patch.joint_id, pw, fw))
-            p_world.append(pw)
-            f_world.append(fw)
-        nlp.constrain(f"{pre}.friction", ca.vertcat(*fric), -np.inf, 0.0)
-        nlp.output(f"{pre}.points", ca.horzcat(*p_world))
-        nlp.output(f"{pre}.forces", ca.horzcat(*f_world))
+        points = [p_j + R_j @ pts[:, i] for i in range(k)]
+        Rs = ca.reshape(nlp.parameter(f"{pre}.R_surface", 9), 3, 3)
+        declare_forces(ctx, pre, self.patch.joint_id, points, self.friction, Rs)
 
     def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
         pre = f"contact.{self.name}"
@@ -173,30 +211,369 @@ class FixedContact(Contact):
         }
 
     def initial_guess(self, problem: Problem) -> dict[str, np.ndarray]:
-        # share the weight evenly over every force point of every contact, along the normal
-        total = sum(c.force_points_world() for c in problem.contacts) or 1
-        phi = np.tile([0.0, 0.0, 1.0 / total], self.n_points)
-        return {f"contact.{self.name}.forces": phi}
+        return {f"contact.{self.name}.forces": force_guess(problem, self.n_points)}
 
     def to_dict(self, outputs: dict[str, np.ndarray]) -> dict[str, Any]:
+        out = self._base_dict()
+        out["pose"] = {"position": self.position.tolist(), "yaw": self.yaw}
+        out["forces"] = _forces_dict(self.patch.frame, outputs, f"contact.{self.name}")
+        return out
+
+
+def _forces_dict(frame: str, outputs: dict[str, np.ndarray], pre: str) -> list[dict[str, Any]]:
+    pts = outputs[f"{pre}.points"].reshape(3, -1, order="F").T
+    fs = outputs[f"{pre}.forces"].reshape(3, -1, order="F").T
+    return [
+        {"frame": frame, "point": p.tolist(), "force": f.tolist()}
+        for p, f in zip(pts, fs, strict=True)
+    ]
+
+
+# --------------------------------------------------------------------------- floating contacts
+def thin_scaling(polygon: ConvexPolygon, mode: str | float = "auto") -> np.ndarray:
+    """S (2, 2), the geometric scaling of sec. IV-F: S = U·diag(1, k)·Uᵀ with U the principal
+    axes of ``polygon`` (the minor one second). ``auto``: k = clamp(0.1 m / minor width, 1, 10),
+    so a 2.5 cm rung is seen 10 cm wide by the solver; ``none``: k = 1; a number: that k."""
+    v = polygon.vertices - polygon.centroid
+    _, vecs = np.linalg.eigh(v.T @ v)
+    U = vecs[:, ::-1]  # major axis first
+    widths = np.ptp(v @ U, axis=0)
+    if mode == "none":
+        k = 1.0
+    elif mode == "auto":
+        k = float(np.clip(0.1 / max(widths[1], 1e-9), 1.0, 10.0))
+    else:
+        k = float(mode)
+    return U @ np.diag([1.0, k]) @ U.T
+
+
+@dataclass(frozen=True)
+class EllipseOptions:
+    """The contact ellipse of a non-inclusive contact (sec. IV).
+
+    ``formulation``: ``paper`` (eqs. 4-6, scaled by the edge length) or ``support`` (the
+    support-function form n·c + sqrt(rx²(n·u)² + ry²(n·v)²) <= b). ``min_radii`` (m) bound the
+    real ellipse's semi-axes from below (the smaller bound on the minor axis, the larger on the
+    major one); ``min_area`` (m²) its area; ``maximize_area`` weights eq. 8's cost
+    -π·rx·ry/min(A(P1), A(P2)); ``scaling`` is the thin-patch scaling of sec. IV-F."""
+
+    formulation: str = "support"
+    min_radii: tuple[float, float] = (0.005, 0.005)
+    min_area: float = 0.0
+    maximize_area: float = 0.0
+    scaling: str | float = "auto"
+
+
+class FloatingContact(Contact):
+    """A robot patch on a surface plane, free to slide and turn in it (paper eq. 2):
+    (O_c - O_s)·N_s = 0, T_c·N_s = 0, B_c·N_s = 0, N_c·N_s <= 0."""
+
+    name: str
+    patch: Patch
+    surface: Surface
+    mu: float
+
+    def _declare_plane(self, ctx: BuildContext) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+        """Coplanarity rows; returns (R_ws (3,3), p_ws (3,), patch vertices in the surface
+        plane (n, 2) counter-clockwise, R_sc = R_wsᵀR_wc (3,3), p_sc (3,))."""
+        nlp = ctx.nlp
         pre = f"contact.{self.name}"
-        pts = outputs[f"{pre}.points"].reshape(3, -1, order="F").T
-        fs = outputs[f"{pre}.forces"].reshape(3, -1, order="F").T
+        R_c, p_c = declare_patch_frame(ctx, self.patch)
+        Rs = ca.reshape(nlp.parameter(f"{pre}.R_surface", 9), 3, 3)
+        ps = nlp.parameter(f"{pre}.p_surface", 3)
+        E = Rs.T @ R_c
+        d = Rs.T @ (p_c - ps)
+        nlp.constrain(f"{pre}.coplanarity", ca.vertcat(d[2], E[2, 0], E[2, 1]), 0.0, 0.0)
+        nlp.constrain(f"{pre}.normals_opposite", E[2, 2], -np.inf, 0.0)
+        v = self.patch.polygon.vertices
+        # patch vertices in the surface plane; the flip of the normal reverses the orientation
+        rows = [d[:2] + E[:2, :2] @ v[i] for i in reversed(range(len(v)))]
+        return Rs, ps, ca.horzcat(*rows).T, E, d
+
+    def _plane_parameters(self) -> dict[str, np.ndarray]:
+        pre = f"contact.{self.name}"
         return {
-            "name": self.name,
-            "type": self.type,
-            "mu": self.mu,
-            "pose": {"position": self.position.tolist(), "yaw": self.yaw},
-            "robot_patch": {
-                "name": self.patch.name,
-                "frame": self.patch.frame,
-                "placement": self.patch.T_frame_patch.homogeneous.tolist(),
-                "vertices": self.patch.polygon.vertices.tolist(),
-            },
-            "surface": self.surface.to_dict(),
-            "ellipse": None,
-            "forces": [
-                {"frame": self.patch.frame, "point": p.tolist(), "force": f.tolist()}
-                for p, f in zip(pts, fs, strict=True)
-            ],
+            f"{pre}.R_surface": self.surface.T_world_surface.rotation,
+            f"{pre}.p_surface": self.surface.T_world_surface.translation,
         }
+
+    def _surface_halfplanes(self, ctx: BuildContext) -> tuple[ca.SX, ca.SX]:
+        """Parameters: outward unit normals (n, 2) and offsets (n,) of the surface polygon."""
+        n = self.surface.polygon.n
+        hp = ca.reshape(ctx.nlp.parameter(f"contact.{self.name}.surface_halfplanes", 3 * n), 3, n)
+        return hp[0:2, :].T, hp[2, :].T
+
+    def _halfplane_parameters(self) -> dict[str, np.ndarray]:
+        normals, offsets = self.surface.polygon.halfplanes()
+        return {f"contact.{self.name}.surface_halfplanes": np.vstack([normals.T, offsets])}
+
+    def realized_pose(self, model: pin.Model, posture_q: np.ndarray) -> tuple[np.ndarray, float]:
+        """(position (2,), yaw) of the patch in the surface frame at configuration q."""
+        data = model.createData()
+        pin.framesForwardKinematics(model, data, posture_q)
+        T_sc = self.surface.T_world_surface.inverse() * data.oMf[self.patch.frame_id]
+        T_sc = T_sc * self.patch.T_frame_patch
+        return T_sc.translation[:2].copy(), float(
+            np.arctan2(T_sc.rotation[1, 0], T_sc.rotation[0, 0])
+        )
+
+
+class _EllipseContact(FloatingContact):
+    """A floating contact with the ellipse variables (x, y, θ, rx, ry) of sec. IV-C, in the
+    surface plane scaled by S (sec. IV-F): the real ellipse is S⁻¹·E'."""
+
+    ellipse: EllipseOptions
+
+    def _declare_ellipse(self, ctx: BuildContext, patch_vertices: ca.SX) -> ca.SX:
+        """Ellipse variables and the card(P1) + card(P2) inclusion rows; returns e (5,)."""
+        from .geometry import ellipse_edge_constraints_paper, ellipse_edge_constraints_support
+
+        nlp, pre = ctx.nlp, f"contact.{self.name}"
+        e = nlp.variable(f"{pre}.ellipse", 5, [-np.inf, -np.inf, -np.inf, 1e-4, 1e-4], np.inf)
+        S = ca.reshape(nlp.parameter(f"{pre}.scaling", 4), 2, 2)
+        n_s = self.surface.polygon.n
+        Vs = ca.reshape(nlp.parameter(f"{pre}.surface_vertices", 2 * n_s), 2, n_s)
+        build = {
+            "paper": ellipse_edge_constraints_paper,
+            "support": ellipse_edge_constraints_support,
+        }[self.ellipse.formulation]
+        surf_scaled = (S @ Vs).T
+        patch_scaled = (S @ patch_vertices.T).T
+        rows = build(surf_scaled, *[e[i] for i in range(5)])
+        rows += build(patch_scaled, *[e[i] for i in range(5)])
+        nlp.constrain(f"{pre}.ellipse_inside", ca.vertcat(*rows), -np.inf, 0.0)
+        # the real ellipse: B = S⁻¹·R(θ)·diag(rx, ry); M = BᵀB has eigenvalues σ1² >= σ2²
+        Sinv = ca.inv(S)
+        c, s = ca.cos(e[2]), ca.sin(e[2])
+        R = ca.vertcat(ca.horzcat(c, -s), ca.horzcat(s, c))
+        B = Sinv @ R @ ca.diag(ca.vertcat(e[3], e[4]))
+        M = B.T @ B
+        # eigenvalues σ2² <= σ1² of M, smoothed by ε so that a round ellipse is no singularity;
+        # both estimates are conservative: σ2²' <= σ2² and σ1²' <= σ1²
+        r_lo, r_hi = sorted(self.ellipse.min_radii)
+        eps = (0.05 * r_lo**2) ** 2
+        half_tr = 0.5 * (M[0, 0] + M[1, 1])
+        disc = ca.sqrt(0.25 * (M[0, 0] - M[1, 1]) ** 2 + M[0, 1] ** 2 + eps)
+        rows = [(half_tr - disc) / r_lo**2 - 1.0, (half_tr + disc - np.sqrt(eps)) / r_hi**2 - 1.0]
+        area = np.pi * e[3] * e[4] / ca.det(S)  # real area [m²]
+        if self.ellipse.min_area > 0:
+            rows.append(area / self.ellipse.min_area - 1.0)
+        nlp.constrain(f"{pre}.ellipse_size", ca.vertcat(*rows), 0.0, np.inf)
+        if self.ellipse.maximize_area > 0:
+            a_min = min(self.surface.polygon.area, self.patch.polygon.area)
+            nlp.minimize(f"{pre}.area", -self.ellipse.maximize_area * area / a_min)
+        nlp.output(f"{pre}.ellipse", e)
+        nlp.output(f"{pre}.ellipse_B", B)
+        return e
+
+    def _ellipse_parameters(self) -> dict[str, np.ndarray]:
+        pre = f"contact.{self.name}"
+        return {
+            f"{pre}.scaling": self.S,
+            f"{pre}.surface_vertices": self.surface.polygon.vertices.T,
+        }
+
+    def _ellipse_guess(self, problem: Problem) -> np.ndarray:
+        """Start inside the surface at the point nearest to the patch's initial position, with
+        small radii, in the scaled plane."""
+        p, yaw = self.realized_pose(problem.robot.model, problem.q_init)
+        poly = self.surface.polygon
+        centre = np.asarray(p, dtype=float)
+        if not poly.contains(centre[None])[0]:
+            centre = poly.centroid
+        # a real ellipse slightly above the minimum radii, aligned with the scaling's axes
+        lam, U = np.linalg.eigh(self.S)  # eigenvalues (1, k) or (k, 1)
+        major = U[:, int(np.argmin(lam))]
+        r_lo, r_hi = sorted(self.ellipse.min_radii)
+        Sc = self.S @ centre
+        theta = float(np.arctan2(major[1], major[0]))
+        return np.array([Sc[0], Sc[1], theta, 1.2 * r_hi, 1.1 * r_lo * float(lam.max())])
+
+    def _ellipse_dict(self, outputs: dict[str, np.ndarray]) -> dict[str, Any]:
+        pre = f"contact.{self.name}"
+        e = outputs[f"{pre}.ellipse"]
+        B = outputs[f"{pre}.ellipse_B"].reshape(2, 2, order="F")
+        U, sig, _ = np.linalg.svd(B)
+        c2 = np.linalg.solve(self.S, e[:2])
+        T = self.surface.T_world_surface
+        centre = T.rotation @ np.array([c2[0], c2[1], 0.0]) + T.translation
+        axes = [(T.rotation @ np.array([U[0, i], U[1, i], 0.0]) * sig[i]).tolist() for i in (0, 1)]
+        return {
+            "center": centre.tolist(),
+            "axes": axes,
+            "radii": sig.tolist(),
+            "angle_in_surface": float(np.arctan2(U[1, 0], U[0, 0])),
+            "center_in_surface": c2.tolist(),
+            "formulation": self.ellipse.formulation,
+            "min_radii": sorted(self.ellipse.min_radii, reverse=True),
+            "min_area": self.ellipse.min_area,
+        }
+
+
+@dataclass
+class GeometricContact(_EllipseContact):
+    """The paper's non-inclusive contact: bears no force; an ellipse lies in both polygons."""
+
+    name: str
+    patch: Patch
+    surface: Surface
+    mu: float
+    ellipse: EllipseOptions = field(default_factory=EllipseOptions)
+    type: str = "geometric"
+
+    def __post_init__(self) -> None:
+        self.S = thin_scaling(self.surface.polygon, self.ellipse.scaling)
+
+    def key(self) -> tuple[Any, ...]:
+        return ("geometric", self.name, self.patch.name, self.surface.polygon.n, self.ellipse)
+
+    def declare(self, ctx: BuildContext) -> None:
+        V = self._declare_plane(ctx)[2]
+        self._declare_ellipse(ctx, V)
+
+    def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
+        return {**self._plane_parameters(), **self._ellipse_parameters()}
+
+    def initial_guess(self, problem: Problem) -> dict[str, np.ndarray]:
+        return {f"contact.{self.name}.ellipse": self._ellipse_guess(problem)}
+
+    def to_dict(self, outputs: dict[str, np.ndarray]) -> dict[str, Any]:
+        out = self._base_dict()
+        out["ellipse"] = self._ellipse_dict(outputs)
+        return out
+
+
+@dataclass
+class SupportContact(_EllipseContact):
+    """A floating, force-bearing non-inclusive contact: forces at k points of the ellipse's
+    boundary, p_i = S⁻¹(c + R(θ)(rx cos t_i, ry sin t_i)), t_i = 2πi/k. The ellipse lies in
+    both polygons, so these are true contact points."""
+
+    name: str
+    patch: Patch
+    surface: Surface
+    mu: float
+    ellipse: EllipseOptions = field(default_factory=EllipseOptions)
+    points: int = 8
+    friction: FrictionModel = field(default_factory=FrictionModel)
+    type: str = "support"
+
+    def __post_init__(self) -> None:
+        if self.points < 4:
+            raise InputError(f"contacts[{self.name}].points", f"{self.points} < 4", "use 4 to 16")
+        self.S = thin_scaling(self.surface.polygon, self.ellipse.scaling)
+
+    def force_points_count(self) -> int:
+        return self.points
+
+    def key(self) -> tuple[Any, ...]:
+        return (
+            "support",
+            self.name,
+            self.patch.name,
+            self.surface.polygon.n,
+            self.ellipse,
+            self.points,
+            self.friction,
+        )
+
+    def declare(self, ctx: BuildContext) -> None:
+        Rs, ps, V, _, _ = self._declare_plane(ctx)
+        e = self._declare_ellipse(ctx, V)
+        Sinv = ca.inv(ca.reshape(ctx.nlp.p[f"contact.{self.name}.scaling"], 2, 2))
+        c, s = ca.cos(e[2]), ca.sin(e[2])
+        points = []
+        for i in range(self.points):
+            t = 2 * np.pi * i / self.points
+            lx, ly = e[3] * np.cos(t), e[4] * np.sin(t)
+            q2 = Sinv @ ca.vertcat(e[0] + c * lx - s * ly, e[1] + s * lx + c * ly)
+            points.append(ps + Rs @ ca.vertcat(q2, 0))
+        pre = f"contact.{self.name}"
+        declare_forces(ctx, pre, self.patch.joint_id, points, self.friction, Rs)
+
+    def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
+        return {
+            **self._plane_parameters(),
+            **self._ellipse_parameters(),
+            f"contact.{self.name}.mu": np.array([self.mu]),
+        }
+
+    def initial_guess(self, problem: Problem) -> dict[str, np.ndarray]:
+        pre = f"contact.{self.name}"
+        return {
+            f"{pre}.ellipse": self._ellipse_guess(problem),
+            f"{pre}.forces": force_guess(problem, self.points),
+        }
+
+    def to_dict(self, outputs: dict[str, np.ndarray]) -> dict[str, Any]:
+        out = self._base_dict()
+        out["ellipse"] = self._ellipse_dict(outputs)
+        out["forces"] = _forces_dict(self.patch.frame, outputs, f"contact.{self.name}")
+        return out
+
+
+@dataclass
+class InclusiveContact(FloatingContact):
+    """Baseline: every vertex of the robot patch inside the surface polygon,
+    card(P1)·card(P2) rows n_k·v_i <= b_k; bears no force."""
+
+    name: str
+    patch: Patch
+    surface: Surface
+    mu: float
+    type: str = "inclusive"
+
+    def key(self) -> tuple[Any, ...]:
+        return ("inclusive", self.name, self.patch.name, self.surface.polygon.n)
+
+    def declare(self, ctx: BuildContext) -> None:
+        V = self._declare_plane(ctx)[2]
+        normals, offsets = self._surface_halfplanes(ctx)
+        rows = normals @ V.T - ca.repmat(offsets, 1, V.shape[0])  # (n_s, n_p)
+        ctx.nlp.constrain(f"contact.{self.name}.inclusion", ca.vec(rows), -np.inf, 0.0)
+
+    def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
+        return {**self._plane_parameters(), **self._halfplane_parameters()}
+
+    def to_dict(self, outputs: dict[str, np.ndarray]) -> dict[str, Any]:
+        return self._base_dict()
+
+
+@dataclass
+class PointContact(FloatingContact):
+    """Baseline: one given point of the robot patch (patch frame, default its origin) on the
+    surface, inside its polygon (card(P2) rows), normals opposite; bears no force."""
+
+    name: str
+    patch: Patch
+    surface: Surface
+    mu: float
+    point: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    type: str = "point"
+
+    def key(self) -> tuple[Any, ...]:
+        return ("point", self.name, self.patch.name, self.surface.polygon.n)
+
+    def declare(self, ctx: BuildContext) -> None:
+        Rs, ps, _, E, d = self._declare_plane(ctx)
+        local = ctx.nlp.parameter(f"contact.{self.name}.point", 2)
+        q2 = d[:2] + E[:2, :2] @ local
+        pw = ps + Rs @ ca.vertcat(q2, d[2])
+        normals, offsets = self._surface_halfplanes(ctx)
+        ctx.nlp.constrain(f"contact.{self.name}.point_inside", normals @ q2 - offsets, -np.inf, 0.0)
+        ctx.nlp.output(f"contact.{self.name}.point_world", pw)
+
+    def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
+        return {
+            **self._plane_parameters(),
+            **self._halfplane_parameters(),
+            f"contact.{self.name}.point": self.point,
+        }
+
+    def to_dict(self, outputs: dict[str, np.ndarray]) -> dict[str, Any]:
+        out = self._base_dict()
+        out["point"] = {
+            "patch": self.point.tolist(),
+            "world": outputs[f"contact.{self.name}.point_world"].tolist(),
+        }
+        return out

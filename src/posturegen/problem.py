@@ -111,6 +111,10 @@ class Term(ABC):
         """Initial values of the variables this term declared (zero when absent)."""
         return {}
 
+    def bounds(self, problem: Problem) -> dict[str, tuple[ArrayLike, ArrayLike]]:
+        """Per-instance (lb, ub) of constraint blocks, overriding the declared ones."""
+        return {}
+
 
 @dataclass(frozen=True)
 class SolverOptions:
@@ -263,16 +267,22 @@ class Problem:
             _CACHE.popitem(last=False)
         return compiled
 
-    def numeric(self, compiled: CompiledNLP) -> tuple[np.ndarray, np.ndarray]:
-        """(x0, p) of this instance for a compiled structure."""
+    def numeric(
+        self, compiled: CompiledNLP
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(x0, p, lbg, ubg) of this instance for a compiled structure."""
         x0 = np.zeros(compiled.n_x)
         p = np.zeros(sum(s.stop - s.start for s in compiled.p_index.values()))
+        lbg, ubg = compiled.lbg.copy(), compiled.ubg.copy()
         for term in self.terms():
             for name, value in term.parameters(self).items():
                 p[compiled.p_index[name]] = np.ravel(value, order="F")
             for name, value in term.initial_guess(self).items():
                 x0[compiled.x_index[name]] = np.ravel(value, order="F")
-        return x0, p
+            for name, (lb, ub) in term.bounds(self).items():
+                lbg[compiled.g_index[name]] = lb
+                ubg[compiled.g_index[name]] = ub
+        return x0, p, lbg, ubg
 
     def summary(self) -> str:
         """Human-readable sizes of the program: variable and constraint blocks, cost terms."""

@@ -64,13 +64,11 @@ def solve(problem: Problem, x0: np.ndarray | None = None) -> Result:
     """Solve the posture problem and verify the posture; never raises for 'not found'."""
     built_before = problem.key() in _cache_keys()
     compiled = problem.compile()
-    x_init, p = problem.numeric(compiled)
+    x_init, p, lbg, ubg = problem.numeric(compiled)
     if x0 is not None:
         x_init = np.asarray(x0, dtype=float)
     t0 = time.perf_counter()
-    sol = compiled.solver(
-        x0=x_init, p=p, lbx=compiled.lbx, ubx=compiled.ubx, lbg=compiled.lbg, ubg=compiled.ubg
-    )
+    sol = compiled.solver(x0=x_init, p=p, lbx=compiled.lbx, ubx=compiled.ubx, lbg=lbg, ubg=ubg)
     wall = time.perf_counter() - t0
     stats = compiled.solver.stats()
     status = str(stats.get("return_status", "unknown"))

@@ -14,14 +14,23 @@ import yaml
 
 from . import _fields as F
 from .constraints import PositionTask
-from .contacts import FixedContact, FrictionModel
+from .contacts import (
+    Contact,
+    EllipseOptions,
+    FixedContact,
+    FrictionModel,
+    GeometricContact,
+    InclusiveContact,
+    PointContact,
+    SupportContact,
+)
 from .costs import ForceCost, PostureCost, TorqueCost
 from .errors import InputError
 from .problem import Problem, SolverOptions, Term
 from .robot import Robot, load_robot
 from .scene import Scene
 
-CONTACT_TYPES = ("fixed",)
+CONTACT_TYPES = ("fixed", "geometric", "support", "inclusive", "point")
 _TOP_REQUIRED = ("robot", "contacts")
 _TOP_OPTIONAL = (
     "mu",
@@ -77,14 +86,53 @@ def _friction(value: Any, field: str) -> FrictionModel:
     return FrictionModel(kind, faces)
 
 
+_ELLIPSE_KEYS = ["formulation", "min_radii", "min_area", "maximize_area", "scaling"]
+_CONTACT_KEYS = {
+    "fixed": ["position", "yaw", "mu", "friction"],
+    "geometric": _ELLIPSE_KEYS,
+    "support": [*_ELLIPSE_KEYS, "points", "mu", "friction"],
+    "inclusive": [],
+    "point": ["point"],
+}
+
+
+def _ellipse_options(c: Any, fld: str) -> EllipseOptions:
+    base = EllipseOptions()
+    form = F.string(c.get("formulation", base.formulation), f"{fld}.formulation")
+    if form not in ("paper", "support"):
+        raise InputError(
+            f"{fld}.formulation", f"unknown formulation '{form}'", "use paper or support"
+        )
+    radii = base.min_radii
+    if "min_radii" in c:
+        r = F.vector(c["min_radii"], 2, f"{fld}.min_radii")
+        if np.any(r <= 0):
+            raise InputError(f"{fld}.min_radii", "radii must be positive", "write [rx, ry] > 0 (m)")
+        radii = (float(r[0]), float(r[1]))
+    scaling = c.get("scaling", base.scaling)
+    if scaling not in ("auto", "none"):
+        scaling = F.number(scaling, f"{fld}.scaling", positive=True)
+    return EllipseOptions(
+        formulation=form,
+        min_radii=radii,
+        min_area=F.number(c.get("min_area", 0.0), f"{fld}.min_area", minimum=0.0),
+        maximize_area=F.number(c.get("maximize_area", 0.0), f"{fld}.maximize_area", minimum=0.0),
+        scaling=scaling,
+    )
+
+
 def _contact(
-    c: Any, i: int, robot: Robot, scene: Scene, mu: float, friction: FrictionModel, names: set[str]
-) -> FixedContact:
+    c: Any,
+    i: int,
+    robot: Robot,
+    scene: Scene,
+    mu: float,
+    friction: FrictionModel,
+    names: set[str],
+) -> Contact:
     fld = f"contacts[{i}]"
     c = F.require_mapping(c, fld)
-    F.check_keys(
-        c, fld, ["robot_patch", "surface", "type"], ["position", "yaw", "mu", "name", "friction"]
-    )
+    F.check_keys(c, fld, ["robot_patch", "surface", "type"], list(c))  # required first
     ctype = F.string(c["type"], f"{fld}.type")
     if ctype not in CONTACT_TYPES:
         raise InputError(
@@ -92,6 +140,7 @@ def _contact(
             f"unknown contact type '{ctype}'",
             f"use one of: {', '.join(CONTACT_TYPES)}",
         )
+    F.check_keys(c, fld, ["robot_patch", "surface", "type"], ["name", *_CONTACT_KEYS[ctype]])
     patch = robot.patch(F.string(c["robot_patch"], f"{fld}.robot_patch"), f"{fld}.robot_patch")
     surface = scene.surface(F.string(c["surface"], f"{fld}.surface"), f"{fld}.surface")
     name = F.string(c.get("name", patch.name), f"{fld}.name")
@@ -102,6 +151,24 @@ def _contact(
     names.add(name)
     mu_c = F.number(c.get("mu", mu), f"{fld}.mu", minimum=0.0)
     fric = _friction(c["friction"], f"{fld}.friction") if "friction" in c else friction
+    if ctype == "geometric":
+        return GeometricContact(name, patch, surface, mu_c, _ellipse_options(c, fld))
+    if ctype == "support":
+        k = c.get("points", 8)
+        if isinstance(k, bool) or not isinstance(k, int) or k < 4:
+            raise InputError(f"{fld}.points", f"expected an integer >= 4, got {k!r}", "use 8")
+        return SupportContact(name, patch, surface, mu_c, _ellipse_options(c, fld), k, fric)
+    if ctype == "inclusive":
+        return InclusiveContact(name, patch, surface, mu_c)
+    if ctype == "point":
+        point = F.vector(c.get("point", [0.0, 0.0]), 2, f"{fld}.point")
+        if not patch.polygon.contains(point[None])[0]:
+            raise InputError(
+                f"{fld}.point",
+                "the point is outside the robot patch",
+                "give a point of the patch polygon, in the patch frame",
+            )
+        return PointContact(name, patch, surface, mu_c, point)
     if "position" not in c:
         raise InputError(
             f"{fld}.position",

@@ -121,7 +121,7 @@ def verify_posture(posture: dict[str, Any], model: pin.Model) -> VerifyReport:
     weight = pin.computeTotalMass(model) * float(np.linalg.norm(model.gravity.linear))
     residual = -pin.computeGeneralizedGravity(model, data, q)
     residual[6:] += tau
-    geo, fric, inside = 0.0, 0.0, 0.0
+    geo, fric, inside, ellipse_size = 0.0, 0.0, 0.0, 0.0
     for contact in posture.get("contacts", []):
         surf = contact["surface"]
         T_ws = pin.SE3(np.array(surf["placement"], dtype=float))
@@ -170,12 +170,27 @@ def verify_posture(posture: dict[str, Any], model: pin.Model) -> VerifyReport:
             J = pin.getJointJacobian(model, data, jid, pin.LOCAL_WORLD_ALIGNED)
             lever = p_w - data.oMi[jid].translation
             residual += J[:3].T @ f_w + J[3:].T @ np.cross(lever, f_w)
+        if contact["type"] == "inclusive":
+            v_c = np.column_stack([P_c.vertices, np.zeros(P_c.n)])
+            v_w = v_c @ T_wc.rotation.T + T_wc.translation
+            inside = max(
+                inside, float(-P_s.distance_inside(_poly_in_plane(T_ws, v_w)[:, :2]).min())
+            )
+        if contact["type"] == "point":
+            p_s = _poly_in_plane(T_ws, np.asarray(contact["point"]["world"], dtype=float)[None])
+            inside = max(inside, float(-P_s.distance_inside(p_s[:, :2])[0]))
         ell = contact.get("ellipse")
         if ell is not None:
             inside = max(inside, _ellipse_outside(ell, T_ws, P_s, T_wc, P_c))
+            radii = sorted((float(r) for r in ell["radii"]), reverse=True)
+            wanted = sorted((float(r) for r in ell.get("min_radii", (0, 0))), reverse=True)
+            small = max(wanted[0] - radii[0], wanted[1] - radii[1])
+            area_short = float(ell.get("min_area", 0.0)) - np.pi * radii[0] * radii[1]
+            ellipse_size = max(ellipse_size, small, area_short / max(radii[0], 1e-9))
     checks.append(Check("contact geometry", geo, TOL_GEOMETRY))
     checks.append(Check("contact points inside polygons", max(inside, 0.0), TOL_GEOMETRY))
     checks.append(Check("friction cones", max(fric, 0.0), TOL_FRICTION))
+    checks.append(Check("contact ellipse size", max(ellipse_size, 0.0), TOL_GEOMETRY))
     scale = np.full(model.nv, weight)
     checks.append(
         Check("static equilibrium", float(np.abs(residual / scale).max()), TOL_EQUILIBRIUM)

@@ -1,0 +1,49 @@
+"""Stance transitions (paper sec. IV-E): a contact found as non-inclusive becomes a fixed,
+force-bearing contact of the next posture, whose forces act at the vertices of the
+intersection of the two polygons; another contact may be released at the same time."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from .contacts import FixedContact, FloatingContact, FrictionModel
+from .errors import InputError
+from .problem import Problem
+from .solve import Result
+
+
+def next_problem(
+    problem: Problem,
+    result: Result,
+    fix: str,
+    release: str | None = None,
+    tasks: list | None = None,
+) -> Problem:
+    """The problem of the next stance: contact ``fix`` (geometric, support, inclusive or point)
+    frozen at its pose in ``result`` as a ``fixed`` contact, contact ``release`` removed, the
+    posture of ``result`` as the initial posture (warm start), ``tasks`` replacing the tasks
+    when given."""
+    names = [c.name for c in problem.contacts]
+    if fix not in names:
+        raise InputError("fix", f"no contact named '{fix}'", f"contacts: {', '.join(names)}")
+    if release is not None and release not in names:
+        raise InputError(
+            "release", f"no contact named '{release}'", f"contacts: {', '.join(names)}"
+        )
+    if release == fix:
+        raise InputError("release", "cannot release the contact being fixed", "name another one")
+    if not result.success:
+        raise InputError("result", "the posture was not verified", "fix a contact of a success")
+    old = problem.contacts[names.index(fix)]
+    if not isinstance(old, FloatingContact):
+        raise InputError("fix", f"contact '{fix}' is already {old.type}", "fix a floating contact")
+    position, yaw = old.realized_pose(problem.robot.model, result.q)
+    friction = getattr(old, "friction", FrictionModel())
+    fixed = FixedContact(old.name, old.patch, old.surface, position, yaw, old.mu, friction)
+    contacts = [fixed if c.name == fix else c for c in problem.contacts if c.name != release]
+    return dataclasses.replace(
+        problem,
+        contacts=contacts,
+        q_init=result.q.copy(),
+        tasks=list(problem.tasks if tasks is None else tasks),
+    )
