@@ -38,6 +38,9 @@ class FamilyReport:
     max_solve_ms: float
     median_call_ms: float
     median_iterations: float
+    variables: int
+    constraints: int
+    contact_rows: int  # constraint rows of the contacts' geometry (not friction)
     failures: tuple[str, ...]
 
     def line(self) -> str:
@@ -46,7 +49,8 @@ class FamilyReport:
             f"{self.family:<24} n={self.n:<4} success={100 * self.success_rate:5.1f}%  "
             f"solve median={self.median_solve_ms:6.1f} ms  min={self.min_solve_ms:6.1f}  "
             f"max={self.max_solve_ms:7.1f}  call median={self.median_call_ms:6.1f} ms  "
-            f"iterations median={self.median_iterations:.0f}"
+            f"iterations median={self.median_iterations:.0f}  "
+            f"vars={self.variables} rows={self.constraints} contact rows={self.contact_rows}"
         )
 
 
@@ -120,6 +124,76 @@ def talos_stand_reach(n: int, seed: int) -> Iterator[Problem]:
         )
 
 
+def _reachable_left_target(rng: np.random.Generator) -> list[float]:
+    """A left-gripper target from forward kinematics of a random left-arm posture of Talos'
+    half-sitting posture (world frame = stance frame)."""
+    robot = load_bundled("talos")
+    model, data = robot.model, robot.model.createData()
+    q = robot.q_init.copy()
+    for name, lo, hi in (
+        ("arm_left_1_joint", -0.6, 1.2),
+        ("arm_left_2_joint", 0.1, 1.6),
+        ("arm_left_3_joint", -1.0, 1.0),
+        ("arm_left_4_joint", -2.0, -0.1),
+    ):
+        q[model.joints[model.getJointId(name)].idx_q] = rng.uniform(lo, hi)
+    pin.framesForwardKinematics(model, data, q)
+    return data.oMf[model.getFrameId("gripper_left_base_link")].translation.tolist()
+
+
+def step_family(
+    depth: tuple[float, float], contact: dict[str, Any]
+) -> Callable[[int, int], Iterator[Problem]]:
+    """Talos, left foot fixed on the ground, the right foot on a random step of depth in
+    ``depth`` [m] (the foot is 0.20 m long) as ``contact``, a reachable left-hand target."""
+
+    def generate(n: int, seed: int) -> Iterator[Problem]:
+        rng = np.random.default_rng(seed)
+        for _ in range(n):
+            d = rng.uniform(*depth)
+            step = {
+                "name": "step",
+                "position": [
+                    rng.uniform(0.2, 0.35),
+                    rng.uniform(-0.2, -0.1),
+                    rng.uniform(0.05, 0.2),
+                ],
+                "rpy": [0.0, 0.0, rng.uniform(-0.3, 0.3)],
+                "vertices": [[-d / 2, -0.25], [d / 2, -0.25], [d / 2, 0.25], [-d / 2, 0.25]],
+            }
+            yield problem_from_dict(
+                {
+                    "robot": "talos",
+                    "surfaces": [
+                        {"name": "ground", "vertices": [[-2, -2], [2, -2], [2, 2], [-2, 2]]},
+                        step,
+                    ],
+                    "contacts": [
+                        {
+                            "robot_patch": "left_sole",
+                            "surface": "ground",
+                            "type": "fixed",
+                            "position": [0.0, 0.1],
+                        },
+                        {"robot_patch": "right_sole", "surface": "step", **contact},
+                    ],
+                    "tasks": [
+                        {
+                            "type": "position",
+                            "frame": "gripper_left_base_link",
+                            "target": _reachable_left_target(rng),
+                        }
+                    ],
+                }
+            )
+
+    return generate
+
+
+_SHORT, _DEEP = (0.08, 0.16), (0.26, 0.34)
+_GEOM = {"type": "geometric", "min_radii": [0.03, 0.03]}
+
+
 def _initial_at(centre: np.ndarray, yaw: float) -> list[float]:
     """Talos' half-sitting posture moved to a stance centre and heading."""
     q = load_bundled("talos").q_init.copy()
@@ -133,6 +207,30 @@ FAMILIES: dict[str, tuple[str, Callable[[int, int], Iterator[Problem]]]] = {
         "Talos, two fixed feet, random stance width/yaws, reachable right-hand targets",
         talos_stand_reach,
     ),
+    "talos-step-short-support": (
+        "right foot on a step 8-16 cm deep (foot 20 cm): geometric contact, support form",
+        step_family(_SHORT, {**_GEOM, "formulation": "support"}),
+    ),
+    "talos-step-short-paper": (
+        "same problems: geometric contact, the paper's form (eqs. 4-6)",
+        step_family(_SHORT, {**_GEOM, "formulation": "paper"}),
+    ),
+    "talos-step-short-inclusive": (
+        "same problems: inclusive baseline (the foot fits only turned across the step)",
+        step_family(_SHORT, {"type": "inclusive"}),
+    ),
+    "talos-step-deep-support": (
+        "right foot on a step 26-34 cm deep (the foot fits): geometric, support form",
+        step_family(_DEEP, {**_GEOM, "formulation": "support"}),
+    ),
+    "talos-step-deep-paper": (
+        "same problems: geometric contact, the paper's form",
+        step_family(_DEEP, {**_GEOM, "formulation": "paper"}),
+    ),
+    "talos-step-deep-inclusive": (
+        "same problems: inclusive baseline (every foot vertex inside the step)",
+        step_family(_DEEP, {"type": "inclusive"}),
+    ),
 }
 
 
@@ -144,6 +242,7 @@ def run_family(name: str, n: int = 100, seed: int = 0, jit: bool = False) -> Fam
         for problem in problems:
             problem.solver_options = dataclasses.replace(problem.solver_options, jit=True)
     solve(problems[0])  # warm-up: builds the solver for this structure
+    compiled = problems[0].compile()
     times, calls, iters, ok, failures = [], [], [], 0, []
     for i, problem in enumerate(problems[1:]):
         t0 = time.perf_counter()
@@ -167,6 +266,13 @@ def run_family(name: str, n: int = 100, seed: int = 0, jit: bool = False) -> Fam
         max_solve_ms=max(ms),
         median_call_ms=1e3 * statistics.median(calls),
         median_iterations=statistics.median(iters),
+        variables=compiled.n_x,
+        constraints=compiled.n_g,
+        contact_rows=sum(
+            s.stop - s.start
+            for name, s in compiled.g_index.items()
+            if name.startswith("contact.") and not name.endswith(".friction")
+        ),
         failures=tuple(failures),
     )
 
