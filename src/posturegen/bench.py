@@ -66,25 +66,39 @@ def _stance(rng: np.random.Generator) -> tuple[list[float], list[float], float, 
     return left, right, yaw_l, yaw_r, yaw
 
 
-def _reachable_target(rng: np.random.Generator, centre: np.ndarray, yaw: float) -> list[float]:
-    """A right-gripper target from forward kinematics of a random arm and torso posture of
-    Talos' half-sitting stance, moved into the stance frame (hence reachable in practice)."""
-    robot = load_bundled("talos")
-    model = robot.model
+_RIGHT_REACH = (
+    ("torso_1_joint", -0.5, 0.5),
+    ("torso_2_joint", -0.1, 0.5),
+    ("arm_right_1_joint", -1.2, 0.6),
+    ("arm_right_2_joint", -1.6, -0.1),
+    ("arm_right_3_joint", -1.0, 1.0),
+    ("arm_right_4_joint", -2.0, -0.1),
+)
+_LEFT_REACH = (
+    ("arm_left_1_joint", -0.6, 1.2),
+    ("arm_left_2_joint", 0.1, 1.6),
+    ("arm_left_3_joint", -1.0, 1.0),
+    ("arm_left_4_joint", -2.0, -0.1),
+)
+
+
+def _reachable_target(
+    rng: np.random.Generator,
+    frame: str,
+    joint_ranges: tuple[tuple[str, float, float], ...],
+    centre: tuple[float, float] | np.ndarray = (0.0, 0.0),
+    yaw: float = 0.0,
+) -> list[float]:
+    """A target for ``frame`` from forward kinematics of Talos' half-sitting posture with the
+    given joints drawn uniformly in their ranges [rad], moved to a stance centre and heading
+    (hence reachable in practice)."""
+    model = load_bundled("talos").model
     data = model.createData()
-    q = robot.q_init.copy()
-    for name, lo, hi in (
-        ("torso_1_joint", -0.5, 0.5),
-        ("torso_2_joint", -0.1, 0.5),
-        ("arm_right_1_joint", -1.2, 0.6),
-        ("arm_right_2_joint", -1.6, -0.1),
-        ("arm_right_3_joint", -1.0, 1.0),
-        ("arm_right_4_joint", -2.0, -0.1),
-    ):
-        jid = model.getJointId(name)
-        q[model.joints[jid].idx_q] = rng.uniform(lo, hi)
+    q = load_bundled("talos").q_init.copy()
+    for name, lo, hi in joint_ranges:
+        q[model.joints[model.getJointId(name)].idx_q] = rng.uniform(lo, hi)
     pin.framesForwardKinematics(model, data, q)
-    p = data.oMf[model.getFrameId("gripper_right_base_link")].translation
+    p = data.oMf[model.getFrameId(frame)].translation
     c, s = np.cos(yaw), np.sin(yaw)
     return [centre[0] + c * p[0] - s * p[1], centre[1] + s * p[0] + c * p[1], float(p[2])]
 
@@ -95,7 +109,7 @@ def talos_stand_reach(n: int, seed: int) -> Iterator[Problem]:
     for _ in range(n):
         left, right, yaw_l, yaw_r, yaw = _stance(rng)
         centre = (np.array(left) + np.array(right)) / 2
-        target = _reachable_target(rng, centre, yaw)
+        target = _reachable_target(rng, "gripper_right_base_link", _RIGHT_REACH, centre, yaw)
         yield problem_from_dict(
             {
                 "robot": "talos",
@@ -122,23 +136,6 @@ def talos_stand_reach(n: int, seed: int) -> Iterator[Problem]:
                 "options": {"initial": _initial_at(centre, yaw)},
             }
         )
-
-
-def _reachable_left_target(rng: np.random.Generator) -> list[float]:
-    """A left-gripper target from forward kinematics of a random left-arm posture of Talos'
-    half-sitting posture (world frame = stance frame)."""
-    robot = load_bundled("talos")
-    model, data = robot.model, robot.model.createData()
-    q = robot.q_init.copy()
-    for name, lo, hi in (
-        ("arm_left_1_joint", -0.6, 1.2),
-        ("arm_left_2_joint", 0.1, 1.6),
-        ("arm_left_3_joint", -1.0, 1.0),
-        ("arm_left_4_joint", -2.0, -0.1),
-    ):
-        q[model.joints[model.getJointId(name)].idx_q] = rng.uniform(lo, hi)
-    pin.framesForwardKinematics(model, data, q)
-    return data.oMf[model.getFrameId("gripper_left_base_link")].translation.tolist()
 
 
 def step_family(
@@ -181,7 +178,7 @@ def step_family(
                         {
                             "type": "position",
                             "frame": "gripper_left_base_link",
-                            "target": _reachable_left_target(rng),
+                            "target": _reachable_target(rng, "gripper_left_base_link", _LEFT_REACH),
                         }
                     ],
                 }
