@@ -98,3 +98,16 @@ def test_not_a_mapping(tmp_path, capsys):
 def test_unknown_demo(capsys):
     assert main(["demo", "moonwalk", "--out", "unused"]) == 2
     assert "unknown demo 'moonwalk'" in capsys.readouterr().err
+
+
+def test_malformed_posture_file_is_one_line(tmp_path, capsys):
+    assert main(["demo", "stand-reach", "--out", str(tmp_path), "--quiet"]) == 0
+    import json
+
+    data = json.loads((tmp_path / "posture.json").read_text())
+    del data["contacts"][0]["surface"]
+    (tmp_path / "broken.json").write_text(json.dumps(data))
+    capsys.readouterr()
+    assert main(["verify", str(tmp_path / "broken.json")]) == 2
+    err = capsys.readouterr().err
+    assert "malformed posture file" in err and len(err.strip().splitlines()) == 1

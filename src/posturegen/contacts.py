@@ -8,6 +8,7 @@ position (x, y) and yaw ψ on the surface is ``T_s_c = Trans(x, y, 0)·Rz(ψ)·R
 
 from __future__ import annotations
 
+from abc import abstractmethod
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -72,9 +73,9 @@ class Contact(Term):
         """Number of force-bearing points (0 for contacts that bear no force)."""
         return 0
 
+    @abstractmethod
     def to_dict(self, outputs: dict[str, np.ndarray]) -> dict[str, Any]:
         """The posture file's entry for this contact, from the solution's outputs."""
-        raise NotImplementedError
 
     def _base_dict(self) -> dict[str, Any]:
         return {

@@ -270,4 +270,12 @@ def model_of_posture(posture: dict[str, Any]) -> pin.Model:
 def verify_file(path: str | Path) -> VerifyReport:
     """Re-check a posture file (``posturegen verify``)."""
     posture = load_posture(path)
-    return verify_posture(posture, model_of_posture(posture))
+    model = model_of_posture(posture)
+    try:
+        return verify_posture(posture, model)
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        raise InputError(
+            str(path),
+            f"malformed posture file ({exc.__class__.__name__}: {exc})",
+            "give a file written by posturegen solve",
+        ) from exc
