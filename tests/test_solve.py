@@ -176,3 +176,11 @@ def test_custom_urdf_with_patch_file(tmp_path):
     r = solve(problem_from_dict(data))
     assert r.success, r.message
     assert r.posture["robot"]["urdf"] == str(HRP2_URDF.resolve())
+
+
+def test_cli_inspect_lists_the_program(capsys):
+    assert main(["inspect", str(_demo_dir() / "stand-reach.yaml")]) == 0
+    out = capsys.readouterr().out
+    assert "variables: 62" in out
+    assert "contact.left_sole.friction: 16" in out
+    assert "torque_limits: 32" in out

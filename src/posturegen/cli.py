@@ -49,6 +49,14 @@ def cmd_solve(args: argparse.Namespace) -> int:
     return _solve_to(Path(args.problem), Path(args.out), args.quiet)
 
 
+def cmd_inspect(args: argparse.Namespace) -> int:
+    """posturegen inspect PROBLEM.yaml: the program's variables, constraints and costs."""
+    from .spec import load_problem
+
+    print(load_problem(Path(args.problem)).summary())
+    return EXIT_OK
+
+
 def cmd_verify(args: argparse.Namespace) -> int:
     """posturegen verify POSTURE.json"""
     from .verify import verify_file
@@ -112,6 +120,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True)
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_solve)
+    p = sub.add_parser("inspect", help="print a problem's variables, constraints and costs")
+    p.add_argument("problem")
+    p.set_defaults(func=cmd_inspect)
     p = sub.add_parser("verify", help="re-check a posture file with Pinocchio")
     p.add_argument("posture")
     p.set_defaults(func=cmd_verify)
