@@ -233,8 +233,9 @@ def _forces_dict(frame: str, outputs: dict[str, np.ndarray], pre: str) -> list[d
 # --------------------------------------------------------------------------- floating contacts
 def thin_scaling(polygon: ConvexPolygon, mode: str | float = "auto") -> np.ndarray:
     """S (2, 2), the geometric scaling of sec. IV-F: S = U·diag(1, k)·Uᵀ with U the principal
-    axes of ``polygon`` (the minor one second). ``auto``: k = clamp(0.1 m / minor width, 1, 10),
-    so a 2.5 cm rung is seen 10 cm wide by the solver; ``none``: k = 1; a number: that k."""
+    axes of ``polygon`` (the minor one second). ``auto``: for a patch thinner than 5 cm,
+    k = min(0.1 m / minor width, 10), so a 2.5 cm rung is seen 10 cm wide by the solver, else
+    k = 1 (a mild scaling only costs the exact radius bounds); ``none``: k = 1; a number: k."""
     v = polygon.vertices - polygon.centroid
     _, vecs = np.linalg.eigh(v.T @ v)
     U = vecs[:, ::-1]  # major axis first
@@ -242,7 +243,7 @@ def thin_scaling(polygon: ConvexPolygon, mode: str | float = "auto") -> np.ndarr
     if mode == "none":
         k = 1.0
     elif mode == "auto":
-        k = float(np.clip(0.1 / max(widths[1], 1e-9), 1.0, 10.0))
+        k = min(0.1 / max(widths[1], 1e-9), 10.0) if widths[1] < 0.05 else 1.0
     else:
         k = float(mode)
     return U @ np.diag([1.0, k]) @ U.T
