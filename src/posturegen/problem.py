@@ -128,6 +128,8 @@ class SolverOptions:
     # Compile the program's functions to C with the system's C compiler (CasADi JIT): about
     # 4 s once per structure and process, then about 35 % faster solves. Needs gcc or cc.
     jit: bool = False
+    # start from given primal and dual values (active-set re-solves of collision avoidance)
+    warm_start: bool = False
 
     def ipopt(self) -> dict[str, Any]:
         """The options dict passed to casadi.nlpsol."""
@@ -146,6 +148,18 @@ class SolverOptions:
         }
         if self.jit:
             opts.update({"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O0"]}})
+        if self.warm_start:
+            opts.update(
+                {
+                    "ipopt.warm_start_init_point": "yes",
+                    "ipopt.mu_init": 1e-5,
+                    "ipopt.warm_start_bound_push": 1e-6,
+                    "ipopt.warm_start_bound_frac": 1e-6,
+                    "ipopt.warm_start_slack_bound_push": 1e-6,
+                    "ipopt.warm_start_slack_bound_frac": 1e-6,
+                    "ipopt.warm_start_mult_bound_push": 1e-6,
+                }
+            )
         return opts
 
 
@@ -208,12 +222,23 @@ class Problem:
     self_collision: bool = False
     torque_limit_scale: float = 1.0  # |τ_j| <= scale·effort_j
     solver_options: SolverOptions = field(default_factory=SolverOptions)
+    collision_options: Any = None  # posturegen.collision.CollisionOptions; None: no avoidance
+    # the active collision rows of the current solve (set by posturegen.solve)
+    collision_term: Term | None = None
 
     def terms(self) -> list[Term]:
         """Every term in declaration order."""
         from .constraints import ConfigurationTerm, StaticEquilibrium
 
-        return [ConfigurationTerm(), *self.contacts, *self.tasks, StaticEquilibrium(), *self.costs]
+        extra = [self.collision_term] if self.collision_term is not None else []
+        return [
+            ConfigurationTerm(),
+            *self.contacts,
+            *self.tasks,
+            *extra,
+            StaticEquilibrium(),
+            *self.costs,
+        ]
 
     def key(self) -> tuple[Any, ...]:
         """The structure key: robot plus each term's key plus solver options."""

@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from dataclasses import dataclass
@@ -60,26 +61,195 @@ class Result:
         return path
 
 
-def solve(problem: Problem, x0: np.ndarray | None = None) -> Result:
-    """Solve the posture problem and verify the posture; never raises for 'not found'."""
+@dataclass
+class _Run:
+    """One IPOPT run: its solution and what it cost."""
+
+    compiled: Any
+    x: np.ndarray
+    p: np.ndarray
+    f: float
+    status: str
+    iterations: int
+    solve_time_s: float
+    build_time_s: float
+    lam_x: np.ndarray | None = None
+    lam_g: np.ndarray | None = None
+
+
+def _run_ipopt(
+    problem: Problem,
+    x0: np.ndarray | None,
+    lam_x0: np.ndarray | None = None,
+    lam_g0: dict[str, np.ndarray] | None = None,
+) -> _Run:
+    """One IPOPT run; with ``lam_g0`` (multipliers per constraint block) a warm start."""
     built_before = problem.key() in _cache_keys()
     compiled = problem.compile()
     x_init, p, lbg, ubg = problem.numeric(compiled)
-    if x0 is not None:
-        x_init = np.asarray(x0, dtype=float)
+    if x0 is not None and x0.shape == x_init.shape:
+        x_init = x0
+    warm: dict[str, Any] = {}
+    if lam_g0 is not None and lam_x0 is not None:
+        lam = np.zeros(compiled.n_g)
+        for name, sl in compiled.g_index.items():
+            if name in lam_g0 and lam_g0[name].size == sl.stop - sl.start:
+                lam[sl] = lam_g0[name]
+        warm = {"lam_x0": lam_x0, "lam_g0": lam}
     t0 = time.perf_counter()
-    sol = compiled.solver(x0=x_init, p=p, lbx=compiled.lbx, ubx=compiled.ubx, lbg=lbg, ubg=ubg)
+    sol = compiled.solver(
+        x0=x_init, p=p, lbx=compiled.lbx, ubx=compiled.ubx, lbg=lbg, ubg=ubg, **warm
+    )
     wall = time.perf_counter() - t0
     stats = compiled.solver.stats()
-    status = str(stats.get("return_status", "unknown"))
-    solve_time = float(stats.get("t_wall_total", wall))
-    x = np.array(sol["x"]).ravel()
-    out = compiled.outputs(x=x, p=p)
+    return _Run(
+        compiled=compiled,
+        x=np.array(sol["x"]).ravel(),
+        p=p,
+        f=float(sol["f"]),
+        status=str(stats.get("return_status", "unknown")),
+        iterations=int(stats.get("iter_count", -1)),
+        solve_time_s=float(stats.get("t_wall_total", wall)),
+        build_time_s=0.0 if built_before else compiled.build_time_s,
+        lam_x=np.array(sol["lam_x"]).ravel(),
+        lam_g=np.array(sol["lam_g"]).ravel(),
+    )
+
+
+def _block_multipliers(run: _Run, term: Any) -> dict[str, np.ndarray]:
+    """The last run's constraint multipliers per block; collision rows keyed by their pair so
+    that they survive the growth of the active set (see _map_collision_multipliers)."""
+    out = {name: run.lam_g[sl] for name, sl in run.compiled.g_index.items()}
+    if term is not None:
+        if "collision.self" in out:
+            out["collision.self"] = dict(zip(term.self_pairs, out["collision.self"], strict=True))
+        if "collision.env" in out:
+            out["collision.env"] = dict(zip(term.env_pairs, out["collision.env"], strict=True))
+    return out
+
+
+def _map_collision_multipliers(lam: dict[str, Any], term: Any) -> dict[str, np.ndarray]:
+    """Multipliers for the new active set: old pairs keep theirs, new pairs start at 0."""
+    out = {k: v for k, v in lam.items() if isinstance(v, np.ndarray)}
+    for block, pairs in (("collision.self", term.self_pairs), ("collision.env", term.env_pairs)):
+        old = lam.get(block)
+        if pairs:
+            old = old if isinstance(old, dict) else {}
+            out[block] = np.array([old.get(p, 0.0) for p in pairs])
+    return out
+
+
+def solve(problem: Problem, x0: np.ndarray | None = None) -> Result:
+    """Solve the posture problem and verify the posture; never raises for 'not found'.
+
+    With collision avoidance, IPOPT runs in an active-set loop (see posturegen.collision):
+    the rows of the pairs that are close enter the program, the solution is checked against
+    every candidate pair, violated pairs are added and IPOPT runs again, warm-started. If the
+    posture then fails the mesh check, the margin grows by 1 cm and the loop runs again."""
+    runs: list[_Run] = []
+    opts = problem.collision_options
+    if opts is None:
+        problem.collision_term = None
+        runs.append(_run_ipopt(problem, None if x0 is None else np.asarray(x0, dtype=float)))
+        return _result(problem, runs)
+    from .collision import CollisionTerm, box_distances, env_boxes, proxy_model, self_distances
+
+    robot = problem.robot
+    pm = proxy_model(robot)
+    boxes = env_boxes(problem)
+    excluded = _excluded_pairs(problem)
+    cand_self = pm.self_pairs if opts.self_collision else np.zeros((0, 2), dtype=int)
+    if len(cand_self) and excluded:
+        jid = np.array([s.joint_id for s in pm.spheres])
+        keep = [(min(jid[i], jid[j]), max(jid[i], jid[j])) not in excluded for i, j in cand_self]
+        cand_self = cand_self[np.array(keep, dtype=bool)]
+    allowed = np.array(
+        [[s.joint_id not in b.allowed_joints for b in boxes] for s in pm.spheres], dtype=bool
+    ).reshape(len(pm.spheres), len(boxes))
+    model, data = robot.model, robot.model.createData()
+
+    def distances(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        pin.forwardKinematics(model, data, q)
+        centers = pm.centers_world(model, data)
+        d_env = box_distances(pm, centers, boxes) if boxes else np.zeros((len(centers), 0))
+        return self_distances(pm, centers, cand_self), np.where(allowed, d_env, np.inf)
+
+    margin = opts.margin
+    x_warm = None if x0 is None else np.asarray(x0, dtype=float)
+    active_self: set[tuple[int, int]] = set()
+    active_env: set[tuple[int, int]] = set()
+    q_check = problem.q_init
+    result: Result | None = None
+    cold = problem.solver_options
+    lam: dict[str, Any] | None = None
+    try:
+        for _attempt in range(opts.tighten + 1):
+            for _round in range(opts.max_rounds):
+                d_self, d_env = distances(q_check)
+                close = margin + opts.activation
+                new_self = {tuple(map(int, cand_self[k])) for k in np.flatnonzero(d_self < close)}
+                new_env = {
+                    (int(i), int(k)) for i, k in zip(*np.nonzero(d_env < close), strict=True)
+                }
+                if runs:
+                    bad_self = {
+                        tuple(map(int, cand_self[k]))
+                        for k in np.flatnonzero(d_self < margin - 1e-6)
+                    }
+                    bad_env = {
+                        (int(i), int(k))
+                        for i, k in zip(*np.nonzero(d_env < margin - 1e-6), strict=True)
+                    }
+                    if bad_self <= active_self and bad_env <= active_env:
+                        break  # no candidate outside the active set is violated
+                active_self |= new_self
+                active_env |= new_env
+                term = CollisionTerm(
+                    pm, tuple(sorted(active_self)), tuple(sorted(active_env)), boxes, margin
+                )
+                problem.collision_term = term
+                if lam is None:
+                    problem.solver_options = cold
+                    run = _run_ipopt(problem, x_warm)
+                else:
+                    problem.solver_options = dataclasses.replace(cold, warm_start=True)
+                    run = _run_ipopt(
+                        problem, x_warm, runs[-1].lam_x, _map_collision_multipliers(lam, term)
+                    )
+                runs.append(run)
+                if run.status not in _IPOPT_OK:
+                    break
+                x_warm = run.x
+                lam = _block_multipliers(run, term)
+                q_check = configuration_from_x(problem, run.compiled, run.x)
+            result = _result(problem, runs, margin)
+            if result.success or runs[-1].status not in _IPOPT_OK:
+                return result
+            if not any(c.name.startswith("collision") for c in result.verification.failures):
+                return result
+            margin += 0.01  # the proxies passed but a mesh did not: tighten and retry
+    finally:
+        problem.solver_options = cold
+    return result  # type: ignore[return-value]
+
+
+def _excluded_pairs(problem: Problem) -> set[tuple[int, int]]:
+    from .collision import excluded_joint_ids
+
+    return excluded_joint_ids(problem.robot, problem.collision_options)
+
+
+def _result(problem: Problem, runs: list[_Run], margin: float | None = None) -> Result:
+    """The Result of the last run (times and iterations summed over every run)."""
+    run = runs[-1]
+    out = run.compiled.outputs(x=run.x, p=run.p)
     outputs = {k: np.array(v).ravel(order="F") for k, v in out.items()}
-    q = configuration_from_x(problem, compiled, x)
+    q = configuration_from_x(problem, run.compiled, run.x)
     torques = outputs["torques"]
-    posture = posture_dict(problem, q, torques, outputs)
-    report = verify_posture(posture, problem.robot.model)
+    posture = posture_dict(problem, q, torques, outputs, margin)
+    geometry = problem.robot.collision_model() if problem.collision_options is not None else None
+    report = verify_posture(posture, problem.robot.model, geometry)
+    status = run.status
     ipopt_ok = status in _IPOPT_OK
     success = ipopt_ok and report.ok
     if success:
@@ -88,15 +258,19 @@ def solve(problem: Problem, x0: np.ndarray | None = None) -> Result:
         message = f"IPOPT did not converge ({status})"
     else:
         message = "IPOPT converged but the re-check failed: " + "; ".join(
-            f"{c.name} {c.value:.3g} > {c.tolerance:.1g}" for c in report.failures
+            f"{c.name} {c.value:.3g} > {c.tolerance:.1g}" + (f" ({c.detail})" if c.detail else "")
+            for c in report.failures
         )
+    iterations = sum(r.iterations for r in runs)
+    solve_time = sum(r.solve_time_s for r in runs)
     posture.update(
         {
             "success": success,
             "status": status,
             "message": message,
-            "iterations": int(stats.get("iter_count", -1)),
+            "iterations": iterations,
             "solve_time_s": solve_time,
+            "ipopt_runs": len(runs),
             "max_violation": report.max_violation,
             "checks": {
                 c.name: {"value": c.value, "tolerance": c.tolerance, "ok": c.ok}
@@ -115,13 +289,13 @@ def solve(problem: Problem, x0: np.ndarray | None = None) -> Result:
         success=success,
         status=status,
         message=message,
-        iterations=int(stats.get("iter_count", -1)),
+        iterations=iterations,
         solve_time_s=solve_time,
-        build_time_s=0.0 if built_before else compiled.build_time_s,
+        build_time_s=sum(r.build_time_s for r in runs),
         q=q,
         torques=torques,
         forces=forces,
-        cost=float(sol["f"]),
+        cost=run.f,
         verification=report,
         posture=posture,
     )
@@ -144,7 +318,11 @@ def configuration_from_x(problem: Problem, compiled: Any, x: np.ndarray) -> np.n
 
 
 def posture_dict(
-    problem: Problem, q: np.ndarray, torques: np.ndarray, outputs: dict[str, np.ndarray]
+    problem: Problem,
+    q: np.ndarray,
+    torques: np.ndarray,
+    outputs: dict[str, np.ndarray],
+    margin: float | None = None,
 ) -> dict[str, Any]:
     """The posture-file content (schema posturegen.posture/1) without the solver fields."""
     robot = problem.robot
@@ -171,4 +349,23 @@ def posture_dict(
         "obstacles": [o.to_dict() for o in problem.scene.obstacles],
         "self_collision": problem.self_collision,
         "torque_limit_scale": problem.torque_limit_scale,
+        "collision": _collision_dict(problem, margin),
+    }
+
+
+def _collision_dict(problem: Problem, margin: float | None) -> dict[str, Any] | None:
+    """What the mesh check must test: the boxes and the excluded joint pairs."""
+    opts = problem.collision_options
+    if opts is None:
+        return None
+    from .collision import env_boxes, proxy_model
+
+    model = problem.robot.model
+    excluded = {tuple(sorted(p)) for p in proxy_model(problem.robot).excluded_joint_pairs}
+    excluded |= {tuple(sorted(p)) for p in opts.exclude}
+    return {
+        "margin": opts.margin if margin is None else margin,
+        "self": opts.self_collision,
+        "exclude": sorted(list(p) for p in excluded),
+        "boxes": [b.to_dict(model) for b in env_boxes(problem)],
     }

@@ -13,6 +13,7 @@ import pinocchio as pin
 import yaml
 
 from . import _fields as F
+from .collision import CollisionOptions, excluded_joint_ids
 from .constraints import PositionTask
 from .contacts import (
     Contact,
@@ -263,25 +264,44 @@ def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
     tasks: list[Term] = [_task(t, i, robot) for i, t in enumerate(tasks_raw)]
     options = F.require_mapping(data.get("options", {}) or {}, "options")
     F.check_keys(
-        options, "options", [], ["initial", "self_collision", "solver", "torque_limit_scale"]
+        options,
+        "options",
+        [],
+        [
+            "initial",
+            "self_collision",
+            "solver",
+            "torque_limit_scale",
+            "environment_collision",
+            "collision_margin",
+            "collision_exclude",
+        ],
     )
     torque_scale = F.number(
         options.get("torque_limit_scale", 1.0), "options.torque_limit_scale", positive=True
     )
     q_init = robot.initial_configuration(options.get("initial"), "options.initial")
-    self_collision = options.get("self_collision", False)
-    if not isinstance(self_collision, bool):
+    self_collision = _flag(options.get("self_collision", False), "options.self_collision")
+    env = options.get("environment_collision", "auto")
+    if env != "auto":
+        env = _flag(env, "options.environment_collision")
+    avoid_env = bool(scene.obstacles) if env == "auto" else env
+    margin = F.number(
+        options.get("collision_margin", 0.01), "options.collision_margin", minimum=0.0
+    )
+    exclude = options.get("collision_exclude", []) or []
+    if not isinstance(exclude, list) or not all(
+        isinstance(p, list) and len(p) == 2 and all(isinstance(n, str) for n in p) for p in exclude
+    ):
         raise InputError(
-            "options.self_collision",
-            f"expected true or false, got {self_collision!r}",
-            "write true or false",
+            "options.collision_exclude",
+            "expected a list of [link, link] pairs",
+            "write [[link_a, link_b], ...]",
         )
-    if self_collision:
-        raise InputError(
-            "options.self_collision",
-            "collision avoidance is not available yet",
-            "set self_collision: false",
-        )
+    collision = None
+    if self_collision or avoid_env:
+        collision = CollisionOptions(self_collision, margin, tuple(tuple(p) for p in exclude))
+        excluded_joint_ids(robot, collision)  # names are checked here
     solver = _solver_options(options.get("solver", {}) or {})
     return Problem(
         robot,
@@ -293,4 +313,11 @@ def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
         self_collision,
         torque_scale,
         solver,
+        collision,
     )
+
+
+def _flag(value: Any, field: str) -> bool:
+    if not isinstance(value, bool):
+        raise InputError(field, f"expected true or false, got {value!r}", "write true or false")
+    return value

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import coal
 import numpy as np
 import pinocchio as pin
 
@@ -87,8 +88,12 @@ def _poly_in_plane(T_world_plane: pin.SE3, points_world: np.ndarray) -> np.ndarr
     return (points_world - T_world_plane.translation) @ T_world_plane.rotation
 
 
-def verify_posture(posture: dict[str, Any], model: pin.Model) -> VerifyReport:
-    """Check a posture dict (posture-file content) against a Pinocchio model."""
+def verify_posture(
+    posture: dict[str, Any], model: pin.Model, geometry: pin.GeometryModel | None = None
+) -> VerifyReport:
+    """Check a posture dict (posture-file content) against a Pinocchio model; with a
+    ``collision`` entry, also on the real collision meshes (``geometry``, loaded from the
+    posture's URDF when not given)."""
     data = model.createData()
     checks: list[Check] = []
     q = np.asarray(posture["q"], dtype=float)
@@ -205,7 +210,96 @@ def verify_posture(posture: dict[str, Any], model: pin.Model) -> VerifyReport:
             err = pin.log3(np.asarray(task["rotation"], dtype=float).T @ M.rotation)
             task_err = max(task_err, float(np.abs(err).max()))
     checks.append(Check("tasks", task_err, TOL_TASK))
+    if posture.get("collision") is not None:
+        if geometry is None:
+            geometry = geometry_of_posture(posture, model)
+        checks.extend(mesh_collision_checks(posture, model, geometry, q))
     return VerifyReport(tuple(checks))
+
+
+TOL_PENETRATION = 0.002  # a robot mesh may be at most this far inside a scene box [m]
+
+
+def mesh_collision_checks(
+    posture: dict[str, Any], model: pin.Model, geometry: pin.GeometryModel, q: np.ndarray
+) -> list[Check]:
+    """coal on the real meshes: no overlapping self-collision pair (all URDF pairs but the
+    SRDF's disabled ones, same or parent-child joints and the posture's exclusions), and no
+    mesh more than TOL_PENETRATION inside a box (each box shrunk by it, then tested)."""
+    col = posture["collision"]
+    gdata = geometry.createData()
+    pin.updateGeometryPlacements(model, model.createData(), geometry, gdata, q)
+    out = []
+    if col.get("self"):
+        gm = geometry.copy()
+        gm.addAllCollisionPairs()
+        srdf = posture["robot"].get("srdf")
+        if srdf:
+            pin.removeCollisionPairs(model, gm, str(srdf), False)
+        excluded = {tuple(sorted(p)) for p in col.get("exclude", [])}
+        keep = []
+        for cp in gm.collisionPairs:
+            a = int(gm.geometryObjects[cp.first].parentJoint)
+            b = int(gm.geometryObjects[cp.second].parentJoint)
+            names = tuple(sorted((model.names[a], model.names[b])))
+            if a == b or model.parents[a] == b or model.parents[b] == a or names in excluded:
+                continue
+            keep.append(cp)
+        gm.removeAllCollisionPairs()
+        for cp in keep:
+            gm.addCollisionPair(cp)
+        gd = gm.createData()
+        pin.updateGeometryPlacements(model, model.createData(), gm, gd, q)
+        pin.computeCollisions(gm, gd, False)
+        hits = [
+            f"{gm.geometryObjects[cp.first].name}/{gm.geometryObjects[cp.second].name}"
+            for cp, res in zip(gm.collisionPairs, gd.collisionResults, strict=True)
+            if res.isCollision()
+        ]
+        out.append(Check("collision: self (meshes)", float(len(hits)), 0.0, ", ".join(hits[:3])))
+    hits = []
+    for box in col.get("boxes", []):
+        half = np.asarray(box["size"], dtype=float) / 2 - TOL_PENETRATION
+        if np.any(half <= 0):
+            continue
+        shape = coal.Box(*(2 * half))
+        T_box = pin.SE3(np.asarray(box["placement"], dtype=float))
+        allowed = set(box.get("allowed_joints", []))
+        req, res = coal.CollisionRequest(), coal.CollisionResult()
+        for k, obj in enumerate(geometry.geometryObjects):
+            if model.names[int(obj.parentJoint)] in allowed:
+                continue
+            res.clear()
+            M = gdata.oMg[k]
+            if coal.collide(
+                obj.geometry,
+                coal.Transform3s(M.rotation, M.translation),
+                shape,
+                coal.Transform3s(T_box.rotation, T_box.translation),
+                req,
+                res,
+            ):
+                hits.append(f"{obj.name}/{box['name']}")
+    out.append(Check("collision: scene (meshes)", float(len(hits)), 0.0, ", ".join(hits[:3])))
+    return out
+
+
+def geometry_of_posture(posture: dict[str, Any], model: pin.Model) -> pin.GeometryModel:
+    """The collision meshes of the posture's URDF (package_dirs from the posture)."""
+    robot = posture["robot"]
+    try:
+        return pin.buildGeomFromUrdf(
+            model,
+            str(robot["urdf"]),
+            pin.GeometryType.COLLISION,
+            package_dirs=[str(p) for p in robot.get("package_dirs", [])],
+        )
+    except ValueError as exc:
+        raise InputError(
+            "robot.package_dirs",
+            f"cannot load the collision meshes: {exc}",
+            "give the folders that hold the URDF's meshes",
+        ) from exc
 
 
 def _yaw(T_sc: pin.SE3) -> float:

@@ -1,0 +1,420 @@
+"""Collision avoidance (paper eq. 1, rows 3-4) with smooth conservative sphere proxies.
+
+Proxies: each joint's collision geometry (all meshes and primitives rigidly attached to it) is
+covered by 1-8 spheres (k-means clusters of its vertices, each radius the farthest vertex of
+its cluster); every vertex of every mesh lies in a sphere (tested). They are fitted once per
+robot and cached on disk.
+
+Distances, as smooth CasADi expressions:
+
+- sphere-sphere: ``|c_a - c_b| - r_a - r_b`` (smooth wherever the centres differ);
+- sphere-box: the six face distances ``s_k = n_k·c - h_k`` of the box give a conservative
+  distance ``max_k s_k <= dist(c, box)``; its smooth lower bound
+  ``LSE_β(s) - log(6)/β <= max_k s_k`` (log-sum-exp, β = 300 /m, so at most 6 mm
+  conservative) minus the radius is the row. Hence capsule-box and mesh-box care are avoided.
+
+Rows are kept few by an active set: only the pairs closer than ``activation`` at the current
+posture enter the program; after a solve every candidate pair is checked and the violated ones
+are added before solving again (:func:`posturegen.solve.solve`). Candidates exclude pairs of one
+joint, parent-child joints, the SRDF's disabled pairs, the user's exclusions, and pairs whose
+proxies already overlap at the robot's reference posture.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+import coal
+import numpy as np
+import pinocchio as pin
+
+from .errors import ModelError
+from .problem import BuildContext, Problem, Term
+from .robot import Robot
+
+PROXY_VERSION = 2
+BETA = 300.0  # [1/m] sharpness of the smooth max over box faces
+MAX_SPHERES = 8
+CYLINDER_SIDES = 16
+
+
+def cache_dir() -> Path:
+    """Where fitted proxies are cached: $POSTUREGEN_CACHE, else ~/.cache/posturegen."""
+    root = os.environ.get("POSTUREGEN_CACHE") or Path.home() / ".cache" / "posturegen"
+    return Path(root) / "proxies"
+
+
+@dataclass(frozen=True)
+class Sphere:
+    """A proxy sphere: centre in its joint's frame [m], radius [m]."""
+
+    joint_id: int
+    center: np.ndarray  # (3,)
+    radius: float
+
+
+def geometry_points(obj: pin.GeometryObject) -> np.ndarray:
+    """Points (k, 3) in the parent joint's frame whose convex hull contains the geometry."""
+    g = obj.geometry
+    if isinstance(g, coal.BVHModelBase):
+        local = np.asarray(g.vertices(), dtype=float)
+    elif isinstance(g, coal.Box):
+        h = np.asarray(g.halfSide, dtype=float)
+        local = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * h
+    elif isinstance(g, coal.Cylinder | coal.Capsule | coal.Cone):
+        # a polygon circumscribing each end circle (radius / cos(π/n)) keeps the hull outside
+        r = g.radius / np.cos(np.pi / CYLINDER_SIDES)
+        t = np.linspace(0, 2 * np.pi, CYLINDER_SIDES, endpoint=False)
+        ring = np.c_[r * np.cos(t), r * np.sin(t)]
+        z = g.halfLength + (g.radius if isinstance(g, coal.Capsule) else 0.0)
+        local = np.vstack([np.c_[ring, np.full(len(t), -z)], np.c_[ring, np.full(len(t), z)]])
+    elif isinstance(g, coal.Sphere):
+        r = g.radius
+        local = np.vstack([np.eye(3) * r, -np.eye(3) * r]) * np.sqrt(3)  # octahedron ⊃ ball
+    else:
+        raise ModelError(f"collision geometry '{obj.name}' has unsupported type {type(g).__name__}")
+    M = obj.placement
+    return local @ np.asarray(M.rotation).T + np.asarray(M.translation)
+
+
+def fit_spheres(
+    points: np.ndarray, max_spheres: int = MAX_SPHERES
+) -> list[tuple[np.ndarray, float]]:
+    """Spheres that contain every point of ``points`` (k, 3): k-means clusters (farthest-point
+    seeding, 12 Lloyd steps), each radius the farthest point of its cluster. k grows from 1
+    until the largest radius is at most 0.6× the body's smallest principal extent (a sphere
+    then barely bulges past the body) or k = max_spheres."""
+    mean = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - mean, full_matrices=False)
+    extents = np.ptp((points - mean) @ vt.T, axis=0)
+    target = max(0.6 * float(extents.min()), 0.02)
+    best: list[tuple[np.ndarray, float]] = []
+    for k in range(1, max_spheres + 1):
+        centers = _farthest_points(points, k)
+        for _ in range(12):
+            owner = np.argmin(np.linalg.norm(points[:, None] - centers[None], axis=2), axis=1)
+            centers = np.array(
+                [
+                    points[owner == i].mean(axis=0) if np.any(owner == i) else centers[i]
+                    for i in range(k)
+                ]
+            )
+        d = np.linalg.norm(points[:, None] - centers[None], axis=2)
+        owner = np.argmin(d, axis=1)
+        best = [
+            (centers[i], float(d[owner == i, i].max()) + 1e-6)
+            for i in range(k)
+            if np.any(owner == i)
+        ]
+        if max(r for _, r in best) <= target:
+            break
+    return best
+
+
+def _farthest_points(points: np.ndarray, k: int) -> np.ndarray:
+    """k seeds: the point farthest from the mean, then each farthest from those chosen."""
+    chosen = [points[int(np.argmax(np.linalg.norm(points - points.mean(axis=0), axis=1)))]]
+    dist = np.linalg.norm(points - chosen[0], axis=1)
+    while len(chosen) < k:
+        chosen.append(points[int(np.argmax(dist))])
+        dist = np.minimum(dist, np.linalg.norm(points - chosen[-1], axis=1))
+    if k == 1:
+        return points.mean(axis=0)[None]
+    return np.array(chosen)
+
+
+@dataclass
+class ProxyModel:
+    """Sphere proxies of a robot and its candidate self-collision pairs."""
+
+    spheres: list[Sphere]
+    # candidate sphere pairs (i, j), i < j, for self-collision
+    self_pairs: np.ndarray  # (n, 2) int
+    excluded_joint_pairs: list[tuple[str, str]] = field(default_factory=list)
+
+    def centers_world(self, model: pin.Model, data: pin.Data) -> np.ndarray:
+        """(S, 3) sphere centres in world for the placements already in ``data.oMi``."""
+        return np.array([data.oMi[s.joint_id].act(s.center) for s in self.spheres])
+
+    @property
+    def radii(self) -> np.ndarray:
+        """(S,) radii [m]."""
+        return np.array([s.radius for s in self.spheres])
+
+
+def _urdf_key(robot: Robot) -> str:
+    h = hashlib.sha1()
+    h.update(f"v{PROXY_VERSION}".encode())
+    for path in (robot.urdf, robot.srdf):
+        if path is not None:
+            h.update(Path(path).read_bytes())
+    return h.hexdigest()[:16]
+
+
+def _fit(robot: Robot) -> list[Sphere]:
+    gm = robot.collision_model()
+    per_joint: dict[int, list[np.ndarray]] = {}
+    for obj in gm.geometryObjects:
+        per_joint.setdefault(int(obj.parentJoint), []).append(geometry_points(obj))
+    spheres = []
+    for jid, pts in sorted(per_joint.items()):
+        for c, r in fit_spheres(np.vstack(pts)):
+            spheres.append(Sphere(jid, c, r))
+    return spheres
+
+
+def _disabled_joint_pairs(robot: Robot) -> set[tuple[int, int]]:
+    """Joint pairs with no collision pair left after the SRDF's disabled pairs."""
+    gm = robot.collision_model().copy()
+    gm.addAllCollisionPairs()
+    all_pairs = {
+        tuple(
+            sorted(
+                (
+                    int(gm.geometryObjects[p.first].parentJoint),
+                    int(gm.geometryObjects[p.second].parentJoint),
+                )
+            )
+        )
+        for p in gm.collisionPairs
+    }
+    if robot.srdf is None:
+        return set()
+    pin.removeCollisionPairs(robot.model, gm, str(robot.srdf), False)
+    kept = {
+        tuple(
+            sorted(
+                (
+                    int(gm.geometryObjects[p.first].parentJoint),
+                    int(gm.geometryObjects[p.second].parentJoint),
+                )
+            )
+        )
+        for p in gm.collisionPairs
+    }
+    return all_pairs - kept
+
+
+def proxy_model(robot: Robot) -> ProxyModel:
+    """The robot's proxies and candidate pairs (fitted once, cached on disk and in memory)."""
+    cached = getattr(robot, "_proxy_model", None)
+    if cached is not None:
+        return cached
+    path = cache_dir() / f"{_urdf_key(robot)}.json"
+    spheres: list[Sphere] | None = None
+    if path.is_file():
+        try:
+            raw = json.loads(path.read_text())
+            spheres = [
+                Sphere(int(s["joint"]), np.array(s["center"]), float(s["radius"]))
+                for s in raw["spheres"]
+            ]
+        except (OSError, ValueError, KeyError, TypeError):
+            spheres = None
+    if spheres is None:
+        spheres = _fit(robot)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(
+                json.dumps(
+                    {
+                        "version": PROXY_VERSION,
+                        "spheres": [
+                            {"joint": s.joint_id, "center": s.center.tolist(), "radius": s.radius}
+                            for s in spheres
+                        ],
+                    }
+                )
+            )
+        except OSError:
+            pass  # a read-only home: fit again next time
+    model = robot.model
+    disabled = _disabled_joint_pairs(robot)
+    # proxies overlapping at the reference posture cannot be separated: disable those pairs
+    data = model.createData()
+    pin.forwardKinematics(model, data, robot.q_init)
+    centers = np.array([data.oMi[s.joint_id].act(s.center) for s in spheres])
+    radii = np.array([s.radius for s in spheres])
+    overlapping: set[tuple[int, int]] = set()
+    pairs = []
+    for i in range(len(spheres)):
+        for j in range(i + 1, len(spheres)):
+            a, b = spheres[i].joint_id, spheres[j].joint_id
+            key = (min(a, b), max(a, b))
+            if a == b or model.parents[a] == b or model.parents[b] == a or key in disabled:
+                continue
+            if np.linalg.norm(centers[i] - centers[j]) - radii[i] - radii[j] < 0:
+                overlapping.add(key)
+            pairs.append((i, j))
+    pairs = [
+        (i, j)
+        for i, j in pairs
+        if (
+            min(spheres[i].joint_id, spheres[j].joint_id),
+            max(spheres[i].joint_id, spheres[j].joint_id),
+        )
+        not in overlapping
+    ]
+    excluded = sorted((model.names[a], model.names[b]) for a, b in overlapping)
+    pm = ProxyModel(spheres, np.array(pairs, dtype=int).reshape(-1, 2), excluded)
+    robot._proxy_model = pm  # type: ignore[attr-defined]
+    return pm
+
+
+# --------------------------------------------------------------------------- options and boxes
+@dataclass(frozen=True)
+class CollisionOptions:
+    """What to avoid: self-collisions (``self_collision``), and always the scene's boxes and
+    support surfaces; ``margin`` [m] between proxies; ``exclude`` pairs of joint names."""
+
+    self_collision: bool = False
+    margin: float = 0.01
+    exclude: tuple[tuple[str, str], ...] = ()
+    activation: float = 0.05  # pairs closer than margin + activation enter the program [m]
+    max_rounds: int = 6  # active-set rounds
+    tighten: int = 2  # retries with a 1 cm larger margin when the mesh check fails
+
+
+@dataclass(frozen=True)
+class EnvBox:
+    """A box to avoid: placement, half sizes [m], joints allowed to touch it."""
+
+    name: str
+    T_world_box: pin.SE3
+    half: np.ndarray  # (3,)
+    allowed_joints: frozenset[int] = frozenset()
+
+    def to_dict(self, model: pin.Model) -> dict[str, Any]:
+        """Entry of the posture file's ``collision.boxes``."""
+        return {
+            "name": self.name,
+            "placement": self.T_world_box.homogeneous.tolist(),
+            "size": (2 * self.half).tolist(),
+            "allowed_joints": sorted(model.names[j] for j in self.allowed_joints),
+        }
+
+
+SURFACE_THICKNESS = 0.02  # support surfaces are avoided as boxes this thick below them [m]
+
+
+def env_boxes(problem: Problem) -> list[EnvBox]:
+    """The scene's obstacles, and its support surfaces as thin boxes under their bounding
+    rectangle, which the joints of the patches in contact with them may touch."""
+    boxes = [EnvBox(o.name, o.T_world_box, np.asarray(o.size) / 2) for o in problem.scene.obstacles]
+    for s in problem.scene.surfaces.values():
+        allowed = frozenset(c.patch.joint_id for c in problem.contacts if c.surface is s)
+        v = s.polygon.vertices
+        lo, hi = v.min(axis=0), v.max(axis=0)
+        centre = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, -SURFACE_THICKNESS / 2])
+        half = np.array([(hi[0] - lo[0]) / 2, (hi[1] - lo[1]) / 2, SURFACE_THICKNESS / 2])
+        boxes.append(
+            EnvBox(
+                f"surface:{s.name}", s.T_world_surface * pin.SE3(np.eye(3), centre), half, allowed
+            )
+        )
+    return boxes
+
+
+def excluded_joint_ids(robot: Robot, options: CollisionOptions) -> set[tuple[int, int]]:
+    """The user's excluded pairs as sorted joint-id pairs (names of joints or frames)."""
+    out = set()
+    for a, b in options.exclude:
+        ja, jb = (_joint_of(robot, n) for n in (a, b))
+        out.add((min(ja, jb), max(ja, jb)))
+    return out
+
+
+def _joint_of(robot: Robot, name: str) -> int:
+    model = robot.model
+    if model.existJointName(name):
+        return int(model.getJointId(name))
+    if model.existFrame(name):
+        return int(model.frames[model.getFrameId(name)].parentJoint)
+    from .errors import InputError
+
+    raise InputError(
+        "options.collision_exclude",
+        f"no joint or link named '{name}'",
+        "name links or joints of the URDF",
+    )
+
+
+# --------------------------------------------------------------------------- distances (numpy)
+def self_distances(pm: ProxyModel, centers: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """Proxy distances |c_i - c_j| - r_i - r_j [m] of sphere pairs (n, 2)."""
+    r = pm.radii
+    d = centers[pairs[:, 0]] - centers[pairs[:, 1]]
+    return np.linalg.norm(d, axis=1) - r[pairs[:, 0]] - r[pairs[:, 1]]
+
+
+def box_distances(pm: ProxyModel, centers: np.ndarray, boxes: list[EnvBox]) -> np.ndarray:
+    """(S, B) conservative distances max_k s_k - r of every sphere to every box [m]."""
+    out = np.empty((len(centers), len(boxes)))
+    for k, b in enumerate(boxes):
+        local = (centers - b.T_world_box.translation) @ b.T_world_box.rotation
+        out[:, k] = (np.abs(local) - b.half).max(axis=1) - pm.radii
+    return out
+
+
+# --------------------------------------------------------------------------- the program's rows
+@dataclass
+class CollisionTerm(Term):
+    """Rows d >= margin for the active sphere pairs and sphere-box pairs (see module doc)."""
+
+    pm: ProxyModel
+    self_pairs: tuple[tuple[int, int], ...]
+    env_pairs: tuple[tuple[int, int], ...]  # (sphere, box index)
+    boxes: list[EnvBox]
+    margin: float
+    name: str = "collision"
+
+    def key(self) -> tuple[Any, ...]:
+        return ("collision", self.self_pairs, self.env_pairs, len(self.boxes))
+
+    def declare(self, ctx: BuildContext) -> None:
+        nlp, st = ctx.nlp, ctx.state
+        margin = nlp.parameter("collision.margin", 1)
+        used = sorted({i for p in self.self_pairs for i in p} | {i for i, _ in self.env_pairs})
+        c = {
+            i: st.p[s.joint_id] + st.R[s.joint_id] @ s.center
+            for i, s in ((i, self.pm.spheres[i]) for i in used)
+        }
+        r = self.pm.radii
+        if self.self_pairs:
+            rows = []
+            for i, j in self.self_pairs:
+                d = c[i] - c[j]
+                rows.append(ca.sqrt(ca.dot(d, d) + 1e-12) - r[i] - r[j] - margin)
+            nlp.constrain("collision.self", ca.vertcat(*rows), 0.0, np.inf)
+        if self.env_pairs:
+            B = ca.reshape(
+                nlp.parameter("collision.boxes", 15 * len(self.boxes)), 15, len(self.boxes)
+            )
+            rows = []
+            for i, k in self.env_pairs:
+                Rb, pb, h = ca.reshape(B[0:9, k], 3, 3), B[9:12, k], B[12:15, k]
+                local = Rb.T @ (c[i] - pb)
+                s = ca.vertcat(local - h, -local - h)  # six face distances
+                smax = ca.mmax(s)
+                lse = smax + ca.log(ca.sum1(ca.exp(BETA * (s - smax)))) / BETA
+                rows.append(lse - np.log(6.0) / BETA - r[i] - margin)
+            nlp.constrain("collision.env", ca.vertcat(*rows), 0.0, np.inf)
+
+    def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
+        out = {"collision.margin": np.array([self.margin])}
+        if self.env_pairs:
+            out["collision.boxes"] = np.column_stack(
+                [
+                    np.concatenate(
+                        [b.T_world_box.rotation.ravel(order="F"), b.T_world_box.translation, b.half]
+                    )
+                    for b in self.boxes
+                ]
+            )
+        return out
