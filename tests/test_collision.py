@@ -1,0 +1,176 @@
+"""Collision avoidance: proxies contain their meshes, smooth distances have the right
+gradients, and postures that collide without the rows do not with them (coal on the meshes)."""
+
+from __future__ import annotations
+
+import copy
+
+import casadi as ca
+import numpy as np
+import pinocchio as pin
+import pytest
+import yaml
+
+from posturegen import problem_from_dict, solve
+from posturegen.cli import _demo_dir
+from posturegen.collision import (
+    BETA,
+    fit_spheres,
+    geometry_points,
+    proxy_model,
+)
+from posturegen.errors import InputError
+from posturegen.robot import load_robot
+from posturegen.verify import mesh_collision_checks
+from tests.conftest import ATLAS_URDF, HRP2_URDF
+
+STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
+ROBOTS = {
+    "talos": "talos",
+    "hrp2": {
+        "urdf": str(HRP2_URDF),
+        "srdf": str(HRP2_URDF.with_suffix(".srdf")),
+        "patches": "hrp2",
+    },
+    "atlas": {"urdf": str(ATLAS_URDF), "package_dirs": [str(ATLAS_URDF.parents[2])]},
+}
+
+
+@pytest.mark.parametrize("name", sorted(ROBOTS))
+def test_proxies_contain_every_mesh_vertex(name):
+    robot = load_robot(ROBOTS[name])
+    pm = proxy_model(robot)
+    by_joint: dict[int, list] = {}
+    for s in pm.spheres:
+        by_joint.setdefault(s.joint_id, []).append(s)
+    for obj in robot.collision_model().geometryObjects:
+        pts = geometry_points(obj)
+        spheres = by_joint[int(obj.parentJoint)]
+        inside = np.zeros(len(pts), dtype=bool)
+        for s in spheres:
+            inside |= np.linalg.norm(pts - s.center, axis=1) <= s.radius + 1e-9
+        assert inside.all(), f"{name}: {obj.name} has {np.sum(~inside)} vertices outside"
+    assert len(pm.self_pairs) > 0
+
+
+def test_fit_spheres_cover_random_clouds():
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        pts = rng.normal(size=(300, 3)) * rng.uniform(0.01, 0.3, 3)
+        spheres = fit_spheres(pts)
+        d = np.min([np.linalg.norm(pts - c, axis=1) - r for c, r in spheres], axis=0)
+        assert np.all(d <= 1e-9)
+        assert 1 <= len(spheres) <= 8
+
+
+def test_proxies_are_cached_on_disk(tmp_path, monkeypatch):
+    monkeypatch.setenv("POSTUREGEN_CACHE", str(tmp_path))
+    robot = load_robot(ROBOTS["hrp2"])
+    robot._proxy_model = None  # force a fresh look-up
+    first = proxy_model(robot)
+    files = list((tmp_path / "proxies").glob("*.json"))
+    assert len(files) == 1
+    robot._proxy_model = None
+    second = proxy_model(robot)
+    assert [s.radius for s in second.spheres] == pytest.approx([s.radius for s in first.spheres])
+
+
+def _fd(fun, x, h=1e-6):
+    return np.array([(fun(x + h * e) - fun(x - h * e)) / (2 * h) for e in np.eye(len(x))]).T
+
+
+def test_distance_gradients_match_finite_differences():
+    """The rows as the solver sees them: sphere-sphere and sphere-box distances of q."""
+    data = copy.deepcopy(STAND)
+    data["options"]["self_collision"] = True
+    data["obstacles"] = [{"name": "box", "box": [0.3, 0.3, 0.3], "position": [0.5, 0.15, 0.9]}]
+    problem = problem_from_dict(data)
+    result = solve(problem)  # sets the active collision rows
+    compiled = problem.compile()
+    assert {"collision.self", "collision.env"} <= set(compiled.g_index)
+    x0, p, _, _ = problem.numeric(compiled)
+    xs = ca.MX.sym("x", x0.size)
+    g = compiled.nlp(xs, p)[1]
+    rows = np.r_[
+        np.arange(compiled.n_g)[compiled.g_index["collision.self"]],
+        np.arange(compiled.n_g)[compiled.g_index["collision.env"]],
+    ]
+    jac = ca.Function("j", [xs], [ca.jacobian(g[rows.tolist()], xs)])
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        x = x0 + 0.05 * rng.normal(size=x0.size)
+        J = np.array(jac(x))
+        J_fd = _fd(lambda v: np.array(compiled.nlp(v, p)[1]).ravel()[rows], x)
+        np.testing.assert_allclose(J, J_fd, atol=1e-6 * max(1.0, np.abs(J).max()))
+    assert result.success, result.message
+
+
+def test_smooth_box_distance_is_conservative():
+    """LSE_β(s) - log(6)/β <= max_k s_k <= true distance, for points around a box."""
+    rng = np.random.default_rng(2)
+    half = np.array([0.2, 0.1, 0.3])
+    for c in rng.normal(size=(200, 3)) * 0.6:
+        s = np.r_[c - half, -c - half]
+        lse = s.max() + np.log(np.exp(BETA * (s - s.max())).sum()) / BETA - np.log(6) / BETA
+        true = np.linalg.norm(np.maximum(np.abs(c) - half, 0))
+        assert lse <= s.max() + 1e-12
+        if true > 0:
+            assert s.max() <= true + 1e-12
+
+
+@pytest.mark.parametrize("target", [[0.15, 0.0, 0.95], [0.15, 0.2, 0.6]])
+def test_self_collision_is_avoided_on_the_meshes(talos, target):
+    data = copy.deepcopy(STAND)
+    data["tasks"][0]["target"] = target
+    free = solve(problem_from_dict(data))
+    assert free.success
+    # without the rows the arm goes through the body: coal sees it
+    probe = copy.deepcopy(free.posture)
+    probe["collision"] = {"self": True, "exclude": [], "boxes": []}
+    hits = mesh_collision_checks(probe, talos.model, talos.collision_model(), free.q)
+    assert hits[0].value > 0, "this target should make the arm cross the body"
+    data["options"]["self_collision"] = True
+    safe = solve(problem_from_dict(data))
+    assert safe.success, safe.message
+    assert safe.posture["checks"]["collision: self (meshes)"]["value"] == 0
+
+
+def test_box_obstacle_is_avoided(talos):
+    data = copy.deepcopy(STAND)
+    data["tasks"][0]["target"] = [0.45, -0.3, 0.75]
+    data["obstacles"] = [{"name": "box", "box": [0.2, 0.2, 0.2], "position": [0.45, -0.3, 0.95]}]
+    free = copy.deepcopy(data)
+    free["options"]["environment_collision"] = False
+    r_free = solve(problem_from_dict(free))
+    probe = copy.deepcopy(r_free.posture)
+    probe["collision"] = {
+        "self": False,
+        "exclude": [],
+        "boxes": [
+            {
+                "name": "box",
+                "placement": pin.SE3(np.eye(3), np.array([0.45, -0.3, 0.95])).homogeneous.tolist(),
+                "size": [0.2, 0.2, 0.2],
+                "allowed_joints": [],
+            }
+        ],
+    }
+    assert mesh_collision_checks(probe, talos.model, talos.collision_model(), r_free.q)[0].value > 0
+    r = solve(problem_from_dict(data))
+    assert r.success, r.message
+    assert r.posture["checks"]["collision: scene (meshes)"]["value"] == 0
+
+
+def test_collision_options_are_validated():
+    data = copy.deepcopy(STAND)
+    data["options"]["collision_exclude"] = [["arm_right_4_link", "no_such_link"]]
+    data["options"]["self_collision"] = True
+    with pytest.raises(InputError, match="no_such_link"):
+        problem_from_dict(data)
+    data["options"]["collision_exclude"] = "all"
+    with pytest.raises(InputError, match="collision_exclude"):
+        problem_from_dict(data)
+    data["options"]["collision_exclude"] = []
+    data["options"]["collision_margin"] = -0.1
+    with pytest.raises(InputError, match="collision_margin"):
+        problem_from_dict(data)
