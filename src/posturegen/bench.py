@@ -187,6 +187,69 @@ def step_family(
     return generate
 
 
+def _stand(target: list[float], options: dict[str, Any], obstacles: list | None = None) -> Problem:
+    """Talos standing on both feet (0.2 m apart) with a right-gripper target."""
+    return problem_from_dict(
+        {
+            "robot": "talos",
+            "surfaces": [{"name": "ground", "vertices": [[-2, -2], [2, -2], [2, 2], [-2, 2]]}],
+            "obstacles": obstacles or [],
+            "contacts": [
+                {
+                    "robot_patch": "left_sole",
+                    "surface": "ground",
+                    "type": "fixed",
+                    "position": [0.0, 0.1],
+                },
+                {
+                    "robot_patch": "right_sole",
+                    "surface": "ground",
+                    "type": "fixed",
+                    "position": [0.0, -0.1],
+                },
+            ],
+            "tasks": [{"type": "position", "frame": "gripper_right_base_link", "target": target}],
+            "options": options,
+        }
+    )
+
+
+def near_body_family(self_collision: bool) -> Callable[[int, int], Iterator[Problem]]:
+    """Right-gripper targets close to the body: in front of the torso (x 0.10-0.30 m,
+    y -0.10-0.10 m, z 0.85-1.15 m) or across to the opposite hip (x 0.10-0.25 m,
+    y 0.05-0.25 m, z 0.55-0.80 m), half each."""
+
+    def generate(n: int, seed: int) -> Iterator[Problem]:
+        rng = np.random.default_rng(seed)
+        for i in range(n):
+            if i % 2 == 0:
+                t = [rng.uniform(0.1, 0.3), rng.uniform(-0.1, 0.1), rng.uniform(0.85, 1.15)]
+            else:
+                t = [rng.uniform(0.1, 0.25), rng.uniform(0.05, 0.25), rng.uniform(0.55, 0.8)]
+            yield _stand(t, {"self_collision": self_collision})
+
+    return generate
+
+
+def box_family(avoid: bool) -> Callable[[int, int], Iterator[Problem]]:
+    """A 0.2 m box in front (x 0.40-0.50, y -0.35 to -0.15, z 0.95-1.10 m) and a right-gripper
+    target right under it (0.25-0.32 m below its centre, 0.15-0.22 m below its bottom)."""
+
+    def generate(n: int, seed: int) -> Iterator[Problem]:
+        rng = np.random.default_rng(seed)
+        for _ in range(n):
+            c = [rng.uniform(0.4, 0.5), rng.uniform(-0.35, -0.15), rng.uniform(0.95, 1.1)]
+            t = [
+                c[0] + rng.uniform(-0.05, 0.05),
+                c[1] + rng.uniform(-0.05, 0.05),
+                c[2] - rng.uniform(0.18, 0.25),
+            ]
+            box = [{"name": "box", "box": [0.2, 0.2, 0.2], "position": c}]
+            yield _stand(t, {"environment_collision": avoid}, box)
+
+    return generate
+
+
 _SHORT, _DEEP = (0.08, 0.16), (0.26, 0.34)
 _GEOM = {"type": "geometric", "min_radii": [0.03, 0.03]}
 
@@ -203,6 +266,22 @@ FAMILIES: dict[str, tuple[str, Callable[[int, int], Iterator[Problem]]]] = {
     "talos-stand-reach": (
         "Talos, two fixed feet, random stance width/yaws, reachable right-hand targets",
         talos_stand_reach,
+    ),
+    "talos-near-body-free": (
+        "targets near the torso and the opposite hip, no collision avoidance (baseline)",
+        near_body_family(False),
+    ),
+    "talos-near-body-collision": (
+        "same problems with self-collision avoidance (meshes re-checked by coal)",
+        near_body_family(True),
+    ),
+    "talos-box-free": (
+        "a target under a box obstacle, the box not avoided (baseline)",
+        box_family(False),
+    ),
+    "talos-box-collision": (
+        "same problems, the box avoided (meshes re-checked by coal)",
+        box_family(True),
     ),
     "talos-step-short-support": (
         "right foot on a step 8-16 cm deep (foot 20 cm): geometric contact, support form",
