@@ -363,6 +363,18 @@ def box_distances(pm: ProxyModel, centers: np.ndarray, boxes: list[EnvBox]) -> n
 
 
 # --------------------------------------------------------------------------- the program's rows
+SOFT_MIN_BETA = 500.0  # [1/m]
+
+
+def _soft_min(values: list[Any]) -> Any:
+    """-LSE_β(-v) <= min(v): a smooth, conservative minimum (by at most log(n)/β)."""
+    if len(values) == 1:
+        return values[0]
+    v = ca.vertcat(*values)
+    m = ca.mmin(v)
+    return m - ca.log(ca.sum1(ca.exp(-SOFT_MIN_BETA * (v - m)))) / SOFT_MIN_BETA
+
+
 @dataclass
 class CollisionTerm(Term):
     """Rows d >= margin for the active sphere pairs and sphere-box pairs (see module doc)."""
@@ -388,9 +400,12 @@ class CollisionTerm(Term):
         r = self.pm.radii
         if self.self_pairs:
             rows = []
-            for i, j in self.self_pairs:
-                d = c[i] - c[j]
-                rows.append(ca.sqrt(ca.dot(d, d) + 1e-12) - r[i] - r[j] - margin)
+            for _, members in self.self_groups():
+                ds = []
+                for i, j in members:
+                    d = c[i] - c[j]
+                    ds.append(ca.sqrt(ca.dot(d, d) + 1e-12) - r[i] - r[j])
+                rows.append(_soft_min(ds) - margin)
             nlp.constrain("collision.self", ca.vertcat(*rows), 0.0, np.inf)
         if self.env_pairs:
             B = ca.reshape(
@@ -405,6 +420,14 @@ class CollisionTerm(Term):
                 lse = smax + ca.log(ca.sum1(ca.exp(BETA * (s - smax)))) / BETA
                 rows.append(lse - np.log(6.0) / BETA - r[i] - margin)
             nlp.constrain("collision.env", ca.vertcat(*rows), 0.0, np.inf)
+
+    def self_groups(self) -> list[tuple[tuple[int, int], list[tuple[int, int]]]]:
+        """Active sphere pairs grouped by joint pair: one row per pair of links."""
+        groups: dict[tuple[int, int], list[tuple[int, int]]] = {}
+        for i, j in self.self_pairs:
+            a, b = self.pm.spheres[i].joint_id, self.pm.spheres[j].joint_id
+            groups.setdefault((min(a, b), max(a, b)), []).append((i, j))
+        return sorted(groups.items())
 
     def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
         out = {"collision.margin": np.array([self.margin])}

@@ -122,7 +122,8 @@ def _block_multipliers(run: _Run, term: Any) -> dict[str, np.ndarray]:
     out = {name: run.lam_g[sl] for name, sl in run.compiled.g_index.items()}
     if term is not None:
         if "collision.self" in out:
-            out["collision.self"] = dict(zip(term.self_pairs, out["collision.self"], strict=True))
+            keys = [k for k, _ in term.self_groups()]
+            out["collision.self"] = dict(zip(keys, out["collision.self"], strict=True))
         if "collision.env" in out:
             out["collision.env"] = dict(zip(term.env_pairs, out["collision.env"], strict=True))
     return out
@@ -131,7 +132,8 @@ def _block_multipliers(run: _Run, term: Any) -> dict[str, np.ndarray]:
 def _map_collision_multipliers(lam: dict[str, Any], term: Any) -> dict[str, np.ndarray]:
     """Multipliers for the new active set: old pairs keep theirs, new pairs start at 0."""
     out = {k: v for k, v in lam.items() if isinstance(v, np.ndarray)}
-    for block, pairs in (("collision.self", term.self_pairs), ("collision.env", term.env_pairs)):
+    groups = [k for k, _ in term.self_groups()]
+    for block, pairs in (("collision.self", groups), ("collision.env", term.env_pairs)):
         old = lam.get(block)
         if pairs:
             old = old if isinstance(old, dict) else {}
