@@ -169,36 +169,25 @@ def _fit(robot: Robot) -> list[Sphere]:
     return spheres
 
 
+def _joint_pairs(gm: pin.GeometryModel) -> set[tuple[int, int]]:
+    """Sorted parent-joint pairs of a geometry model's collision pairs."""
+    out = set()
+    for p in gm.collisionPairs:
+        a = int(gm.geometryObjects[p.first].parentJoint)
+        b = int(gm.geometryObjects[p.second].parentJoint)
+        out.add((min(a, b), max(a, b)))
+    return out
+
+
 def _disabled_joint_pairs(robot: Robot) -> set[tuple[int, int]]:
     """Joint pairs with no collision pair left after the SRDF's disabled pairs."""
-    gm = robot.collision_model().copy()
-    gm.addAllCollisionPairs()
-    all_pairs = {
-        tuple(
-            sorted(
-                (
-                    int(gm.geometryObjects[p.first].parentJoint),
-                    int(gm.geometryObjects[p.second].parentJoint),
-                )
-            )
-        )
-        for p in gm.collisionPairs
-    }
     if robot.srdf is None:
         return set()
+    gm = robot.collision_model().copy()
+    gm.addAllCollisionPairs()
+    all_pairs = _joint_pairs(gm)
     pin.removeCollisionPairs(robot.model, gm, str(robot.srdf), False)
-    kept = {
-        tuple(
-            sorted(
-                (
-                    int(gm.geometryObjects[p.first].parentJoint),
-                    int(gm.geometryObjects[p.second].parentJoint),
-                )
-            )
-        )
-        for p in gm.collisionPairs
-    }
-    return all_pairs - kept
+    return all_pairs - _joint_pairs(gm)
 
 
 def proxy_model(robot: Robot) -> ProxyModel:
