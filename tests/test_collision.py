@@ -174,3 +174,17 @@ def test_collision_options_are_validated():
     data["options"]["collision_margin"] = -0.1
     with pytest.raises(InputError, match="collision_margin"):
         problem_from_dict(data)
+
+
+def test_verify_file_runs_the_mesh_checks(tmp_path):
+    from posturegen.verify import verify_file
+
+    data = copy.deepcopy(STAND)
+    data["options"]["self_collision"] = True
+    r = solve(problem_from_dict(data))
+    assert r.success, r.message
+    path = r.write(tmp_path / "posture.json")
+    report = verify_file(path)
+    names = {c.name for c in report.checks}
+    assert {"collision: self (meshes)", "collision: scene (meshes)"} <= names
+    assert report.ok
