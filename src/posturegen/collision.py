@@ -34,7 +34,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from .errors import ModelError
+from .errors import InputError, ModelError
 from .problem import BuildContext, Problem, Term
 from .robot import Robot
 
@@ -192,7 +192,7 @@ def _disabled_joint_pairs(robot: Robot) -> set[tuple[int, int]]:
 
 def proxy_model(robot: Robot) -> ProxyModel:
     """The robot's proxies and candidate pairs (fitted once, cached on disk and in memory)."""
-    cached = getattr(robot, "_proxy_model", None)
+    cached = robot._proxy_model
     if cached is not None:
         return cached
     path = cache_dir() / f"{_urdf_key(robot)}.json"
@@ -252,7 +252,7 @@ def proxy_model(robot: Robot) -> ProxyModel:
     ]
     excluded = sorted((model.names[a], model.names[b]) for a, b in overlapping)
     pm = ProxyModel(spheres, np.array(pairs, dtype=int).reshape(-1, 2), excluded)
-    robot._proxy_model = pm  # type: ignore[attr-defined]
+    robot._proxy_model = pm
     return pm
 
 
@@ -325,8 +325,6 @@ def _joint_of(robot: Robot, name: str) -> int:
         return int(model.getJointId(name))
     if model.existFrame(name):
         return int(model.frames[model.getFrameId(name)].parentJoint)
-    from .errors import InputError
-
     raise InputError(
         "options.collision_exclude",
         f"no joint or link named '{name}'",

@@ -326,6 +326,11 @@ class _EllipseContact(FloatingContact):
 
     ellipse: EllipseOptions
 
+    def _init_scaling(self) -> None:
+        """S (2, 2) of sec. IV-F for this surface, and whether it is not the identity."""
+        self.S = thin_scaling(self.surface.polygon, self.ellipse.scaling)
+        self.scaled = not np.allclose(self.S, np.eye(2))
+
     def _declare_ellipse(self, ctx: BuildContext, patch_vertices: ca.SX) -> ca.SX:
         """Ellipse variables and the card(P1) + card(P2) inclusion rows; returns e (5,)."""
         from .geometry import ellipse_edge_constraints_paper, ellipse_edge_constraints_support
@@ -432,8 +437,7 @@ class GeometricContact(_EllipseContact):
     type: str = "geometric"
 
     def __post_init__(self) -> None:
-        self.S = thin_scaling(self.surface.polygon, self.ellipse.scaling)
-        self.scaled = not np.allclose(self.S, np.eye(2))
+        self._init_scaling()
 
     def key(self) -> tuple[Any, ...]:
         return (
@@ -479,8 +483,7 @@ class SupportContact(_EllipseContact):
     def __post_init__(self) -> None:
         if self.points < 4:
             raise InputError(f"contacts[{self.name}].points", f"{self.points} < 4", "use 4 to 16")
-        self.S = thin_scaling(self.surface.polygon, self.ellipse.scaling)
-        self.scaled = not np.allclose(self.S, np.eye(2))
+        self._init_scaling()
 
     def force_points_count(self) -> int:
         return self.points

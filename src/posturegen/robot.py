@@ -79,6 +79,7 @@ class Robot:
         self.q_upper[self.q_upper > 1e10] = np.inf
         self.joint_names = [self.model.names[i] for i in self.kinematics.actuated_joint_ids()]
         self._collision_model: pin.GeometryModel | None = None
+        self._proxy_model: Any = None  # posturegen.collision.ProxyModel, fitted on first use
 
     @property
     def mass(self) -> float:

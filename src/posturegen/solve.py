@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .problem import Problem
+from .problem import _CACHE, Problem
 from .verify import SCHEMA, VerifyReport, verify_posture
 
 _IPOPT_OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
@@ -84,7 +84,7 @@ def _run_ipopt(
     lam_g0: dict[str, np.ndarray] | None = None,
 ) -> _Run:
     """One IPOPT run; with ``lam_g0`` (multipliers per constraint block) a warm start."""
-    built_before = problem.key() in _cache_keys()
+    built_before = problem.key() in _CACHE
     compiled = problem.compile()
     x_init, p, lbg, ubg = problem.numeric(compiled)
     if x0 is not None and x0.shape == x_init.shape:
@@ -301,12 +301,6 @@ def _result(problem: Problem, runs: list[_Run], margin: float | None = None) -> 
         verification=report,
         posture=posture,
     )
-
-
-def _cache_keys() -> set[Any]:
-    from .problem import _CACHE
-
-    return set(_CACHE)
 
 
 def configuration_from_x(problem: Problem, compiled: Any, x: np.ndarray) -> np.ndarray:

@@ -227,8 +227,10 @@ def mesh_collision_checks(
     SRDF's disabled ones, same or parent-child joints and the posture's exclusions), and no
     mesh more than TOL_PENETRATION inside a box (each box shrunk by it, then tested)."""
     col = posture["collision"]
+    data = model.createData()
+    pin.forwardKinematics(model, data, q)
     gdata = geometry.createData()
-    pin.updateGeometryPlacements(model, model.createData(), geometry, gdata, q)
+    pin.updateGeometryPlacements(model, data, geometry, gdata)
     out = []
     if col.get("self"):
         gm = geometry.copy()
@@ -249,7 +251,7 @@ def mesh_collision_checks(
         for cp in keep:
             gm.addCollisionPair(cp)
         gd = gm.createData()
-        pin.updateGeometryPlacements(model, model.createData(), gm, gd, q)
+        pin.updateGeometryPlacements(model, data, gm, gd)
         pin.computeCollisions(gm, gd, False)
         hits = [
             f"{gm.geometryObjects[cp.first].name}/{gm.geometryObjects[cp.second].name}"
