@@ -242,7 +242,7 @@ def box_family(avoid: bool) -> Callable[[int, int], Iterator[Problem]]:
             t = [
                 c[0] + rng.uniform(-0.05, 0.05),
                 c[1] + rng.uniform(-0.05, 0.05),
-                c[2] - rng.uniform(0.18, 0.25),
+                c[2] - rng.uniform(0.25, 0.32),
             ]
             box = [{"name": "box", "box": [0.2, 0.2, 0.2], "position": c}]
             yield _stand(t, {"environment_collision": avoid}, box)

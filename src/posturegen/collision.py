@@ -362,6 +362,11 @@ def _soft_min(values: list[Any]) -> Any:
     return m - ca.log(ca.sum1(ca.exp(-SOFT_MIN_BETA * (v - m)))) / SOFT_MIN_BETA
 
 
+def _center(state: Any, sphere: Sphere) -> Any:
+    """Symbolic centre (3,) of a proxy sphere in the frame of a kinematic state."""
+    return state.p[sphere.joint_id] + state.R[sphere.joint_id] @ sphere.center
+
+
 @dataclass
 class CollisionTerm(Term):
     """Rows d >= margin for the active sphere pairs and sphere-box pairs (see module doc)."""
@@ -379,13 +384,13 @@ class CollisionTerm(Term):
     def declare(self, ctx: BuildContext) -> None:
         nlp, st = ctx.nlp, ctx.state
         margin = nlp.parameter("collision.margin", 1)
-        used = sorted({i for p in self.self_pairs for i in p} | {i for i, _ in self.env_pairs})
-        c = {
-            i: st.p[s.joint_id] + st.R[s.joint_id] @ s.center
-            for i, s in ((i, self.pm.spheres[i]) for i in used)
-        }
         r = self.pm.radii
         if self.self_pairs:
+            # self distances do not depend on the base: compute them in the base frame, which
+            # keeps the base pose and its exponential map out of these rows' Hessians
+            local = ctx.kin.forward(ca.SX.zeros(3), ca.SX.eye(3), ctx.joints)
+            used = sorted({i for p in self.self_pairs for i in p})
+            c = {i: _center(local, self.pm.spheres[i]) for i in used}
             rows = []
             for _, members in self.self_groups():
                 ds = []
@@ -398,6 +403,8 @@ class CollisionTerm(Term):
             B = ca.reshape(
                 nlp.parameter("collision.boxes", 15 * len(self.boxes)), 15, len(self.boxes)
             )
+            used = sorted({i for i, _ in self.env_pairs})
+            c = {i: _center(st, self.pm.spheres[i]) for i in used}
             rows = []
             for i, k in self.env_pairs:
                 Rb, pb, h = ca.reshape(B[0:9, k], 3, 3), B[9:12, k], B[12:15, k]
