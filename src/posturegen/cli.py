@@ -1,4 +1,4 @@
-"""Command line: ``posturegen solve | verify | demo | bench``.
+"""Command line: ``posturegen solve | inspect | verify | demo | bench | render | view``.
 
 Exit codes: 0 verified success; 1 no posture found (the file is still written, success false);
 2 invalid input (one line on stderr naming the field and the fix).
@@ -27,7 +27,7 @@ def demo_names() -> list[str]:
     return sorted(p.stem for p in _demo_dir().glob("*.yaml"))
 
 
-def _solve_to(problem_path: Path, out: Path, quiet: bool = False) -> int:
+def _solve_to(problem_path: Path, out: Path, quiet: bool = False, png: str | None = None) -> int:
     from .solve import solve
     from .spec import load_problem
 
@@ -41,12 +41,18 @@ def _solve_to(problem_path: Path, out: Path, quiet: bool = False) -> int:
             f"{1e3 * result.solve_time_s:.1f} ms (+{1e3 * result.build_time_s:.0f} ms build)"
         )
         print(f"wrote {path}")
+    if png is not None:
+        from .viz import render_png
+
+        figure = render_png(path, Path(png) if png else path.with_suffix(".png"))
+        if not quiet:
+            print(f"wrote {figure}")
     return EXIT_OK if result.success else EXIT_NOT_FOUND
 
 
 def cmd_solve(args: argparse.Namespace) -> int:
     """posturegen solve PROBLEM.yaml --out DIR"""
-    return _solve_to(Path(args.problem), Path(args.out), args.quiet)
+    return _solve_to(Path(args.problem), Path(args.out), args.quiet, args.png)
 
 
 def cmd_inspect(args: argparse.Namespace) -> int:
@@ -68,22 +74,126 @@ def cmd_verify(args: argparse.Namespace) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    """posturegen demo --list | posturegen demo NAME --out DIR"""
+    """posturegen demo --list | posturegen demo NAME --out DIR [--robot NAME]"""
+    from .scenes import SCENES, scene
     from .spec import read_yaml
 
     names = demo_names()
     if args.list or args.name is None:
+        for name, info in SCENES.items():
+            print(f"{name:<16} [{info.robot}] {info.description}")
         for name in names:
-            data = read_yaml(_demo_dir() / f"{name}.yaml")
-            print(f"{name:<16} {data.get('description', '')}")
+            if name not in SCENES:
+                data = read_yaml(_demo_dir() / f"{name}.yaml")
+                print(f"{name:<16} {data.get('description', '')}")
         return EXIT_OK
-    if args.name not in names:
-        raise PosturegenError(f"demo: unknown demo '{args.name}' (known: {', '.join(names)})")
+    known = sorted(set(names) | set(SCENES))
+    if args.name not in known:
+        raise PosturegenError(f"demo: unknown demo '{args.name}' (known: {', '.join(known)})")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    src = _demo_dir() / f"{args.name}.yaml"
-    (out / "problem.yaml").write_text(src.read_text())
-    return _solve_to(src, out, args.quiet)
+    if args.name in names and args.robot is None:
+        src = _demo_dir() / f"{args.name}.yaml"
+        (out / "problem.yaml").write_text(src.read_text())
+        return _solve_to(src, out, args.quiet, args.png)
+    return _run_sequence(scene(args.name, args.robot), out, args.quiet, args.png, final=True)
+
+
+def cmd_climb(args: argparse.Namespace) -> int:
+    """posturegen climb SCENE --robot NAME --steps K --out DIR"""
+    from .scenes import SCENES, scene
+
+    climbs = [n for n, info in SCENES.items() if info.climb_steps is not None]
+    if args.scene not in climbs:
+        raise PosturegenError(f"climb: unknown climb '{args.scene}' (known: {', '.join(climbs)})")
+    steps = args.steps if args.steps is not None else SCENES[args.scene].climb_steps
+    if steps is None or steps < 1:
+        raise PosturegenError("--steps: expected an integer >= 1 (steps of each foot)")
+    seq = scene(args.scene, args.robot, steps)
+    return _run_sequence(seq, Path(args.out), args.quiet, args.png, final=False)
+
+
+def _run_sequence(seq: dict, out: Path, quiet: bool, png: str | None, final: bool) -> int:
+    """Run a sequence with a progress bar; with ``final`` also copy the last posture to
+    DIR/posture.json. Exit 0 when every stage was verified, 1 otherwise (said on stderr)."""
+    import shutil
+    import time
+
+    from .sequence import run_sequence
+
+    robot = seq["robot"] if isinstance(seq["robot"], str) else seq["robot"].get("name")
+    t_start = time.perf_counter()
+
+    def progress(k: int, n: int, name: str, rep: object) -> None:
+        if quiet:
+            return
+        done = k + (1 if rep is not None else 0)
+        bar = "#" * round(24 * done / n) + "." * (24 - round(24 * done / n))
+        elapsed = time.perf_counter() - t_start
+        if rep is None:
+            line = f"[{bar}] {k + 1}/{n} {name} ..."
+            print(f"\r{line:<100}", end="", flush=True, file=sys.stderr)
+            return
+        r = rep.result  # type: ignore[attr-defined]
+        state = "ok" if r.success else "FAILED"
+        line = (
+            f"[{bar}] {k + 1}/{n} {name}: {state}, {r.iterations} it, IPOPT "
+            f"{1e3 * r.solve_time_s:.0f} ms, stage {rep.wall_time_s:.1f} s, "  # type: ignore[attr-defined]
+            f"total {elapsed:.1f} s"
+        )
+        print(f"\r{line:<100}", file=sys.stderr, flush=True)
+
+    report = run_sequence(seq, out, progress)
+    last = report.stages[-1]
+    if final:
+        shutil.copyfile(out / last.posture_file, out / "posture.json")
+    if png is not None:
+        from .viz import render_png
+
+        for st in report.stages:
+            render_png(out / st.posture_file, (out / st.posture_file).with_suffix(".png"))
+    if not quiet:
+        print(f"wrote {out / 'sequence.json'} ({len(report.stages)} stages)")
+    if report.success:
+        if not quiet:
+            print(f"{report.name} on {robot}: every stage verified")
+        return EXIT_OK
+    print(
+        f"posturegen: {report.name} on {robot}: no verified posture at stage "
+        f"'{last.name}' ({last.result.message}); nothing after it was solved",
+        file=sys.stderr,
+    )
+    return EXIT_NOT_FOUND
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    """posturegen render POSTURE.json [-o FILE.png]: the paper-style figure."""
+    from .viz import render_png
+
+    out = Path(args.out) if args.out else Path(args.posture).with_suffix(".png")
+    path = render_png(args.posture, out, meshes=args.meshes, dpi=args.dpi, title=args.title)
+    print(f"wrote {path}")
+    return EXIT_OK
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    """posturegen view POSTURE.json|SEQUENCE.json [-o FILE.html]: the interactive viewer."""
+    from .viz import write_html
+
+    out = Path(args.out) if args.out else Path(args.source).with_suffix(".html")
+    path = write_html(args.source, out, meshes=args.meshes)
+    print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")
+    return EXIT_OK
+
+
+def _add_png_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--png",
+        nargs="?",
+        const="",
+        metavar="FILE",
+        help="also draw the posture to FILE (default: DIR/posture.png)",
+    )
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
@@ -119,6 +229,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("problem")
     p.add_argument("--out", required=True)
     p.add_argument("--quiet", action="store_true")
+    _add_png_option(p)
     p.set_defaults(func=cmd_solve)
     p = sub.add_parser("inspect", help="print a problem's variables, constraints and costs")
     p.add_argument("problem")
@@ -131,7 +242,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--list", action="store_true")
     p.add_argument("--out", default="out")
     p.add_argument("--quiet", action="store_true")
+    p.add_argument("--robot", help="robot name (talos, g1, romeo, hrp2, atlas)")
+    _add_png_option(p)
     p.set_defaults(func=cmd_demo)
+    p = sub.add_parser("climb", help="solve a scripted contact sequence (stairs, ladders)")
+    p.add_argument("scene")
+    p.add_argument("--robot", help="robot name (default: the scene's robot)")
+    p.add_argument("--steps", type=int, help="how far to climb (steps of each foot)")
+    p.add_argument("--out", default="out")
+    p.add_argument("--quiet", action="store_true")
+    _add_png_option(p)
+    p.set_defaults(func=cmd_climb)
     p = sub.add_parser("bench", help="run the seeded benchmark families")
     p.add_argument("--json", help="also write the reports to this JSON file")
     p.add_argument("--family", action="append", help="run only this family (repeatable)")
@@ -139,6 +260,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--jit", action="store_true", help="compile the solvers to C first (needs gcc)")
     p.set_defaults(func=cmd_bench)
+    meshes = {"choices": ["visual", "collision"], "default": "visual", "help": "robot meshes"}
+    p = sub.add_parser("render", help="draw a posture file to a PNG (paper-style figure)")
+    p.add_argument("posture")
+    p.add_argument("-o", "--out", help="PNG file (default: the posture file's name, .png)")
+    p.add_argument("--meshes", **meshes)
+    p.add_argument("--dpi", type=float, default=100.0, help="100: 1600x900 pixels")
+    p.add_argument("--title", help="the figure's title (default: robot, file and status)")
+    p.set_defaults(func=cmd_render)
+    p = sub.add_parser("view", help="write a posture or sequence file's 3-D viewer (one HTML)")
+    p.add_argument("source", help="a posture file, or a sequence file (a climb's stances)")
+    p.add_argument("-o", "--out", help="HTML file (default: the source's name, .html)")
+    p.add_argument("--meshes", **meshes)
+    p.set_defaults(func=cmd_view)
     return parser
 
 

@@ -38,9 +38,11 @@ from .errors import InputError, ModelError
 from .problem import BuildContext, Problem, Term
 from .robot import Robot
 
-PROXY_VERSION = 2
+PROXY_VERSION = 3
 BETA = 300.0  # [1/m] sharpness of the smooth max over box faces
 MAX_SPHERES = 8
+MAX_SPHERES_PATCH = 40
+PATCH_SPHERE_RADIUS = 0.03  # [m] largest proxy radius on a link that carries a sole patch
 CYLINDER_SIDES = 16
 
 
@@ -84,16 +86,16 @@ def geometry_points(obj: pin.GeometryObject) -> np.ndarray:
 
 
 def fit_spheres(
-    points: np.ndarray, max_spheres: int = MAX_SPHERES
+    points: np.ndarray, max_spheres: int = MAX_SPHERES, max_radius: float = np.inf
 ) -> list[tuple[np.ndarray, float]]:
     """Spheres that contain every point of ``points`` (k, 3): k-means clusters (farthest-point
     seeding, 12 Lloyd steps), each radius the farthest point of its cluster. k grows from 1
     until the largest radius is at most 0.6× the body's smallest principal extent (a sphere
-    then barely bulges past the body) or k = max_spheres."""
+    then barely bulges past the body) and at most ``max_radius``, or k = max_spheres."""
     mean = points.mean(axis=0)
     _, _, vt = np.linalg.svd(points - mean, full_matrices=False)
     extents = np.ptp((points - mean) @ vt.T, axis=0)
-    target = max(0.6 * float(extents.min()), 0.02)
+    target = min(max(0.6 * float(extents.min()), 0.02), max_radius)
     best: list[tuple[np.ndarray, float]] = []
     for k in range(1, max_spheres + 1):
         centers = _farthest_points(points, k)
@@ -150,7 +152,14 @@ class ProxyModel:
 
 def _urdf_key(robot: Robot) -> str:
     h = hashlib.sha1()
-    h.update(f"v{PROXY_VERSION}".encode())
+    h.update(
+        f"v{PROXY_VERSION}/soles/{MAX_SPHERES}/{MAX_SPHERES_PATCH}/{PATCH_SPHERE_RADIUS}".encode()
+    )
+    h.update(
+        repr(
+            sorted((p.frame, p.T_frame_patch.homogeneous.tobytes()) for p in robot.patches.values())
+        ).encode()
+    )
     for path in (robot.urdf, robot.srdf):
         if path is not None:
             h.update(Path(path).read_bytes())
@@ -162,9 +171,17 @@ def _fit(robot: Robot) -> list[Sphere]:
     per_joint: dict[int, list[np.ndarray]] = {}
     for obj in gm.geometryObjects:
         per_joint.setdefault(int(obj.parentJoint), []).append(geometry_points(obj))
+    # feet stand on the scene: finer proxies keep the spheres from bulging far past the sole
+    # (Talos: 7.7 -> 1.9 cm below it), so a foot can stand next to a riser. On the hands they
+    # made the box test infeasible (36 small spheres on the Talos wrist), so soles only.
+    patch_joints = {p.joint_id for n, p in robot.patches.items() if n.endswith("sole")}
     spheres = []
     for jid, pts in sorted(per_joint.items()):
-        for c, r in fit_spheres(np.vstack(pts)):
+        if jid in patch_joints:
+            fitted = fit_spheres(np.vstack(pts), MAX_SPHERES_PATCH, PATCH_SPHERE_RADIUS)
+        else:
+            fitted = fit_spheres(np.vstack(pts))
+        for c, r in fitted:
             spheres.append(Sphere(jid, c, r))
     return spheres
 
@@ -265,6 +282,7 @@ class CollisionOptions:
     self_collision: bool = False
     margin: float = 0.01
     exclude: tuple[tuple[str, str], ...] = ()
+    environment: bool = True  # avoid the scene's obstacles and support surfaces
     activation: float = 0.05  # pairs closer than margin + activation enter the program [m]
     max_rounds: int = 6  # active-set rounds
     tighten: int = 2  # retries with a 1 cm larger margin when the mesh check fails
@@ -289,19 +307,21 @@ class EnvBox:
         }
 
 
-SURFACE_THICKNESS = 0.02  # support surfaces are avoided as boxes this thick below them [m]
-
-
 def env_boxes(problem: Problem) -> list[EnvBox]:
-    """The scene's obstacles, and its support surfaces as thin boxes under their bounding
-    rectangle, which the joints of the patches in contact with them may touch."""
+    """The scene's obstacles, and its support surfaces as boxes under their bounding
+    rectangle (``Surface.thickness`` deep), which the joints of the patches in contact with
+    them may touch (none when the problem avoids self-collisions only)."""
+    opts = problem.collision_options
+    if opts is not None and not opts.environment:
+        return []
     boxes = [EnvBox(o.name, o.T_world_box, np.asarray(o.size) / 2) for o in problem.scene.obstacles]
     for s in problem.scene.surfaces.values():
         allowed = frozenset(c.patch.joint_id for c in problem.contacts if c.surface is s)
         v = s.polygon.vertices
         lo, hi = v.min(axis=0), v.max(axis=0)
-        centre = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, -SURFACE_THICKNESS / 2])
-        half = np.array([(hi[0] - lo[0]) / 2, (hi[1] - lo[1]) / 2, SURFACE_THICKNESS / 2])
+        t = s.thickness
+        centre = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, -t / 2])
+        half = np.array([(hi[0] - lo[0]) / 2, (hi[1] - lo[1]) / 2, t / 2])
         boxes.append(
             EnvBox(
                 f"surface:{s.name}", s.T_world_surface * pin.SE3(np.eye(3), centre), half, allowed

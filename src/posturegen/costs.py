@@ -13,9 +13,14 @@ from .problem import BuildContext, Problem, Term
 
 @dataclass
 class PostureCost(Term):
-    """weight·(|qj - qj0|² + |p - p0|²/(0.1 m)² + |w|²): stay close to the initial posture."""
+    """weight·(|qj - qj0|² + |p - p0|²/(0.1 m)² + |w|²): stay close to the initial posture.
+
+    ``reference`` chooses qj0: ``initial`` (the problem's initial posture) or ``default`` (the
+    robot's default posture, e.g. half-sitting: what a climb's stages keep coming back to,
+    while each stage still starts from the previous posture)."""
 
     weight: float = 1.0
+    reference: str = "initial"
     name: str = "posture"
 
     def key(self) -> tuple[Any, ...]:
@@ -39,7 +44,9 @@ class PostureCost(Term):
 
     def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
         return {
-            "posture.joints0": problem.q_init[7:],
+            "posture.joints0": (
+                problem.robot.q_init[7:] if self.reference == "default" else problem.q_init[7:]
+            ),
             "posture.base0": problem.q_init[0:3],
             "posture.weight": np.array([self.weight]),
         }

@@ -10,6 +10,7 @@ so a second problem of the same shape (other targets, other contact poses) pays 
 from __future__ import annotations
 
 import collections
+import tempfile
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import Any
@@ -152,7 +153,14 @@ class SolverOptions:
         if self.mu_init is not None:
             opts["ipopt.mu_init"] = self.mu_init
         if self.jit:
-            opts.update({"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O0"]}})
+            opts.update(
+                {
+                    "jit": True,
+                    "compiler": "shell",
+                    # keep CasADi's temporary C and object files out of the working directory
+                    "jit_options": {"flags": ["-O0"], "directory": tempfile.gettempdir()},
+                }
+            )
         if self.warm_start:
             opts.update(
                 {

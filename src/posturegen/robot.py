@@ -10,6 +10,7 @@ from __future__ import annotations
 import functools
 import importlib.metadata
 import importlib.resources
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -23,7 +24,7 @@ from .errors import InputError, ModelError
 from .geometry import ConvexPolygon
 from .kinematics import CasadiKinematics
 
-BUNDLED = ("talos",)
+BUNDLED = ("talos", "g1", "romeo")
 
 
 def example_robot_data_dir() -> Path:
@@ -114,9 +115,12 @@ class Robot:
     def initial_configuration(
         self, initial: Any = None, field_name: str = "options.initial"
     ) -> np.ndarray:
-        """q (nq,) from a reference-configuration name, an explicit list, or the default."""
+        """q (nq,) from a reference-configuration name, a ``{joint: value}`` mapping over the
+        neutral posture, an explicit list of the nq numbers, or the default."""
         if initial is None:
             return self.q_init.copy()
+        if isinstance(initial, Mapping):
+            return self.configuration_from_joints(initial, field_name)
         if isinstance(initial, str):
             if initial not in self.reference_configurations:
                 known = ", ".join(sorted(self.reference_configurations)) or "none"
@@ -133,6 +137,47 @@ class Robot:
                 "the base quaternion q[3:7] is not unit",
                 "give a unit quaternion (x, y, z, w)",
             )
+        return q
+
+    def configuration_from_joints(
+        self, values: Mapping[str, Any], field_name: str = "initial"
+    ) -> np.ndarray:
+        """q (nq,): the neutral posture (base at the origin, identity orientation) with the
+        named actuated joints set to the given values [rad or m], each inside its limits."""
+        model = self.model
+        q = pin.neutral(model)
+        q[2] = 0.0
+        for name, value in values.items():
+            fld = f"{field_name}.{name}"
+            jid = int(model.getJointId(name)) if isinstance(name, str) else model.njoints
+            if jid <= 1 or jid >= model.njoints:  # 0: universe, 1: the free-flyer root
+                known = ", ".join(self.joint_names[:4])
+                raise InputError(
+                    fld,
+                    f"robot '{self.name}' has no actuated joint '{name}'",
+                    f"use joint names of the URDF ({known}, ...)",
+                )
+            joint = model.joints[jid]
+            x = F.number(value, fld)
+            i = joint.idx_q
+            if joint.nq == 1:
+                lo = float(model.lowerPositionLimit[i])
+                hi = float(model.upperPositionLimit[i])
+                if not lo - 1e-9 <= x <= hi + 1e-9:
+                    raise InputError(
+                        fld,
+                        f"{x} is outside the joint limits [{lo:.6g}, {hi:.6g}]",
+                        "give a value inside the limits",
+                    )
+                q[i] = x
+            elif joint.nq == 2 and joint.nv == 1:  # unbounded revolute joint: (cos, sin)
+                q[i : i + 2] = np.cos(x), np.sin(x)
+            else:
+                raise InputError(
+                    fld,
+                    f"joint '{name}' has {joint.nq} configuration numbers",
+                    "set only one-degree-of-freedom joints by name",
+                )
         return q
 
     def collision_model(self) -> pin.GeometryModel:

@@ -20,6 +20,9 @@ class Surface:
     name: str
     T_world_surface: pin.SE3
     polygon: ConvexPolygon
+    # the solid under the surface [m]: avoided as a box this thick by the links not in
+    # contact with the surface (a stair's block, so that its front face is the riser)
+    thickness: float = 0.02
 
     @property
     def normal(self) -> np.ndarray:
@@ -37,6 +40,7 @@ class Surface:
             "name": self.name,
             "placement": self.T_world_surface.homogeneous.tolist(),
             "vertices": self.polygon.vertices.tolist(),
+            "thickness": self.thickness,
         }
 
 
@@ -82,7 +86,7 @@ class Scene:
         for i, s in enumerate(surfaces):
             fld = f"surfaces[{i}]"
             s = F.require_mapping(s, fld)
-            F.check_keys(s, fld, ["name", "vertices"], ["position", "rpy"])
+            F.check_keys(s, fld, ["name", "vertices"], ["position", "rpy", "thickness"])
             name = F.string(s["name"], f"{fld}.name")
             if name in out:
                 raise InputError(
@@ -92,7 +96,8 @@ class Scene:
             poly = ConvexPolygon(
                 F.points2d(s["vertices"], f"{fld}.vertices"), field=f"{fld}.vertices"
             )
-            out[name] = Surface(name, T, poly)
+            thickness = F.number(s.get("thickness", 0.02), f"{fld}.thickness", positive=True)
+            out[name] = Surface(name, T, poly, thickness)
         obs: list[Obstacle] = []
         if not isinstance(obstacles, list):
             raise InputError("obstacles", "expected a list", "write obstacles: [{name: ..., ...}]")

@@ -362,6 +362,7 @@ def posture_dict(
         "contacts": [c.to_dict(outputs) for c in problem.contacts],
         "tasks": tasks,
         "obstacles": [o.to_dict() for o in problem.scene.obstacles],
+        "surfaces": [s.to_dict() for s in problem.scene.surfaces.values()],
         "self_collision": problem.self_collision,
         "torque_limit_scale": problem.torque_limit_scale,
         "collision": _collision_dict(problem, margin),

@@ -206,8 +206,15 @@ def _task(t: Any, i: int, robot: Robot) -> PositionTask:
 
 def _costs(value: Any) -> list[Term]:
     v = F.require_mapping(value if value is not None else {}, "costs")
-    F.check_keys(v, "costs", [], ["posture", "forces", "torques"])
-    out: list[Term] = [PostureCost(F.number(v.get("posture", 1.0), "costs.posture", minimum=0.0))]
+    F.check_keys(v, "costs", [], ["posture", "posture_reference", "forces", "torques"])
+    ref = v.get("posture_reference", "initial")
+    if ref not in ("initial", "default"):
+        raise InputError(
+            "costs.posture_reference", f"unknown reference {ref!r}", "use initial or default"
+        )
+    out: list[Term] = [
+        PostureCost(F.number(v.get("posture", 1.0), "costs.posture", minimum=0.0), ref)
+    ]
     out.append(ForceCost(F.number(v.get("forces", 1e-2), "costs.forces", minimum=0.0)))
     if v.get("torques"):
         out.append(TorqueCost(F.number(v["torques"], "costs.torques", minimum=0.0)))
@@ -300,7 +307,9 @@ def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
         )
     collision = None
     if self_collision or avoid_env:
-        collision = CollisionOptions(self_collision, margin, tuple(tuple(p) for p in exclude))
+        collision = CollisionOptions(
+            self_collision, margin, tuple(tuple(p) for p in exclude), environment=avoid_env
+        )
         excluded_joint_ids(robot, collision)  # names are checked here
     solver = _solver_options(options.get("solver", {}) or {})
     return Problem(

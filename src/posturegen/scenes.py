@@ -1,0 +1,504 @@
+"""The shipped scenes (paper sec. V) as contact sequences, for any robot with the four named
+patches ``left_sole``, ``right_sole``, ``left_hand``, ``right_hand``.
+
+Each scene builder returns a sequence dict (see :mod:`posturegen.sequence`): the scene's
+surfaces and obstacles and the stages that lead to the paper's situation (``demo``) or climb
+``steps`` steps (``climb``). Geometry is in metres, world frame: x forward (towards the
+ladder or stairs), z up, the robot starting around the origin.
+
+The paper's robots HRP-2 and ATLAS are not on PyPI: :func:`robot_spec` finds their URDFs in
+a robots folder (``$POSTUREGEN_ROBOTS``, else ``shared/robots`` or ``../shared/robots`` from
+the working directory or from the source checkout).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from .errors import InputError
+from .robot import BUNDLED, load_robot
+
+PAPER_ROBOTS: dict[str, dict[str, Any]] = {
+    "hrp2": {"urdf": "hrp2/hrp2.urdf", "srdf": "hrp2/hrp2.srdf", "patches": "hrp2"},
+    "atlas": {
+        "urdf": "drake_models/atlas/atlas_convex_hull.urdf",
+        "patches": "atlas",
+        "package_dirs": ["."],
+    },
+}
+ROBOT_NAMES = (*BUNDLED, *PAPER_ROBOTS)
+
+
+def robots_dir() -> Path | None:
+    """The folder holding the paper's robot models, or None when there is none."""
+    env = os.environ.get("POSTUREGEN_ROBOTS")
+    candidates = [Path(env)] if env else []
+    here = Path(__file__).resolve()
+    for base in (Path.cwd(), *here.parents[:4]):
+        candidates += [base / "shared" / "robots", base.parent / "shared" / "robots"]
+    for c in candidates:
+        if (c / "hrp2" / "hrp2.urdf").is_file():
+            return c.resolve()
+    return None
+
+
+def robot_spec(name: str) -> Any:
+    """The ``robot`` entry of a problem for a robot name (bundled or HRP-2/ATLAS)."""
+    if name in BUNDLED:
+        return name
+    if name not in PAPER_ROBOTS:
+        raise InputError(
+            "--robot", f"unknown robot '{name}'", f"use one of: {', '.join(ROBOT_NAMES)}"
+        )
+    root = robots_dir()
+    if root is None:
+        raise InputError(
+            "--robot",
+            f"the {name} model is not on PyPI and no robots folder was found",
+            "set POSTUREGEN_ROBOTS to the folder holding hrp2/ and drake_models/",
+        )
+    spec = dict(PAPER_ROBOTS[name])
+    spec["urdf"] = str(root / spec["urdf"])
+    if "srdf" in spec:
+        spec["srdf"] = str(root / spec["srdf"])
+    if "package_dirs" in spec:
+        spec["package_dirs"] = [str(root)]
+    spec["name"] = name
+    return spec
+
+
+# --------------------------------------------------------------------------- geometry helpers
+def rect(
+    name: str, centre: list[float], size: tuple[float, float], rpy: Any = (0, 0, 0)
+) -> dict[str, Any]:
+    """A rectangular support surface ``size`` = (x, y) [m] centred at ``centre``."""
+    hx, hy = size[0] / 2, size[1] / 2
+    return {
+        "name": name,
+        "position": [float(v) for v in centre],
+        "rpy": [float(v) for v in rpy],
+        "vertices": [[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]],
+    }
+
+
+def box(name: str, centre: list[float], size: list[float], rpy: Any = (0, 0, 0)) -> dict[str, Any]:
+    """A box obstacle of full extents ``size`` [m]."""
+    return {
+        "name": name,
+        "box": [float(v) for v in size],
+        "position": [float(v) for v in centre],
+        "rpy": [float(v) for v in rpy],
+    }
+
+
+GROUND = rect("ground", [0.0, 0.0, 0.0], (3.0, 3.0))
+
+
+@dataclass(frozen=True)
+class RobotSize:
+    """Numbers that scale a scene to a robot [m]: sole length and width, leg length (sole to
+    hip), shoulder height above the soles, all at the default posture."""
+
+    sole_length: float
+    sole_width: float
+    hip_height: float
+    shoulder_height: float
+
+
+def robot_size(robot_name: str) -> RobotSize:
+    """Measure a robot at its default posture (patch extents and frame heights)."""
+    robot = load_robot(robot_spec(robot_name))
+    model, data = robot.model, robot.model.createData()
+    pin.framesForwardKinematics(model, data, robot.q_init)
+    sole = robot.patch("right_sole")
+    v = sole.polygon.vertices
+    z_sole = data.oMf[sole.frame_id].translation[2]
+    hand = robot.patch("right_hand")
+    # the hand's kinematic chain: its highest joint below the torso is the shoulder
+    chain, j = [], hand.joint_id
+    while j > 1:
+        chain.append(j)
+        j = model.parents[j]
+    heights = [data.oMi[k].translation[2] for k in chain]
+    leg, j = [], sole.joint_id
+    while j > 1:
+        leg.append(j)
+        j = model.parents[j]
+    return RobotSize(
+        float(np.ptp(v[:, 0])),
+        float(np.ptp(v[:, 1])),
+        float(max(data.oMi[k].translation[2] for k in leg) - z_sole),
+        float(max(heights) - z_sole),
+    )
+
+
+def _feet_on_ground(x: float = 0.0, half_width: float = 0.1) -> list[dict[str, Any]]:
+    return [
+        {
+            "robot_patch": "left_sole",
+            "surface": "ground",
+            "type": "fixed",
+            "position": [x, half_width],
+        },
+        {
+            "robot_patch": "right_sole",
+            "surface": "ground",
+            "type": "fixed",
+            "position": [x, -half_width],
+        },
+    ]
+
+
+def _keep(*names: str) -> list[dict[str, Any]]:
+    return [{"name": n, "robot_patch": n, "surface": "-", "type": "keep"} for n in names]
+
+
+CLIMB_COSTS: dict[str, Any] = {"posture": 1.0, "posture_reference": "default", "forces": 1.0}
+COMMON_OPTIONS: dict[str, Any] = {
+    "self_collision": True,
+    "environment_collision": True,
+    "solver": {"max_iter": 400},
+}
+
+
+# --------------------------------------------------------------------------- scenes
+def stand_reach(robot: str, steps: int = 1) -> dict[str, Any]:
+    """Both feet fixed on flat ground, the right hand's patch at a point in front."""
+    r = load_robot(robot_spec(robot))
+    frame = r.patch("right_hand").frame
+    size = robot_size(robot)
+    target = [0.3 * size.shoulder_height, -0.25, 0.75 * size.shoulder_height]
+    return {
+        "name": "stand-reach",
+        "description": "both feet fixed on the ground, right hand at a target in front",
+        "robot": robot_spec(robot),
+        "mu": 0.7,
+        "surfaces": [GROUND],
+        "obstacles": [],
+        "options": COMMON_OPTIONS,
+        "stages": [
+            {
+                "name": "reach",
+                "contacts": _feet_on_ground(),
+                "tasks": [{"type": "position", "frame": frame, "target": target}],
+            }
+        ],
+    }
+
+
+def wall_brace(robot: str, steps: int = 1) -> dict[str, Any]:
+    """The left hand braced on a wall to the left, the right hand reaching far to the
+    right-front: without the brace the target is out of the balance region."""
+    r = load_robot(robot_spec(robot))
+    frame = r.patch("right_hand").frame
+    size = robot_size(robot)
+    wall_y = 0.35 + 0.12 * size.shoulder_height
+    wall = rect(
+        "wall",
+        [0.1, wall_y, 0.8 * size.shoulder_height],
+        (1.2, 1.2),
+        rpy=(math.pi / 2, 0.0, 0.0),  # outward normal -y: facing the robot
+    )
+    target = [0.45 * size.shoulder_height + 0.25, -0.35, 0.55 * size.shoulder_height]
+    return {
+        "name": "wall-brace",
+        "description": "left hand braced on a wall, right hand reaching far to the front-right",
+        "robot": robot_spec(robot),
+        "mu": 0.7,
+        "surfaces": [GROUND, wall],
+        "obstacles": [],
+        "options": COMMON_OPTIONS,
+        "stages": [
+            {
+                "name": "brace and reach",
+                "contacts": [
+                    *_feet_on_ground(),
+                    {
+                        "robot_patch": "left_hand",
+                        "surface": "wall",
+                        "type": "support",
+                        "min_radii": [0.02, 0.02],
+                    },
+                ],
+                "tasks": [{"type": "position", "frame": frame, "target": target}],
+            }
+        ],
+    }
+
+
+def _steps_geometry(
+    n: int, x0: float, rise: float, depth: float, width: float, last_depth: float
+) -> list[dict[str, Any]]:
+    """Stairs: step k (1..n) is a block ``depth`` deep and ``rise`` high whose top, at
+    z = k·rise, is the support surface ``stepk`` (its front edge at x0 + (k-1)·depth; the last
+    step ``last_depth`` deep). The block is avoided by every link not in contact with that
+    step, so its front face is the riser that stops a toe on the step below, while a foot on
+    the step may overhang its front edge."""
+    surfaces = []
+    for k in range(1, n + 1):
+        d = last_depth if k == n else depth
+        x_front = x0 + (k - 1) * depth
+        s = rect(f"step{k}", [x_front + d / 2, 0.0, k * rise], (d, width))
+        s["thickness"] = rise
+        surfaces.append(s)
+    return surfaces
+
+
+def stairs(robot: str, steps: int = 2) -> dict[str, Any]:
+    """Paper V-C: steps shorter than the foot (0.65× its length), each next riser an obstacle;
+    each stage puts one foot on the next step maximizing the contact ellipse (eq. 8), so the
+    foot overhangs the edge as far as the riser allows; the last step is deep enough for the
+    whole foot."""
+    size = robot_size(robot)
+    depth = round(0.65 * size.sole_length, 3)
+    rise = 0.12
+    n = max(1, steps)
+    surfaces = _steps_geometry(
+        n + 1, 0.5 * size.sole_length + 0.25, rise, depth, 0.8, 2.2 * size.sole_length
+    )
+    stages: list[dict[str, Any]] = [{"name": "stand", "contacts": _feet_on_ground()}]
+    moving, other = "right_sole", "left_sole"
+    for k in range(1, n + 1):
+        stages.append(
+            {
+                "name": f"{moving.split('_')[0]} foot on step {k}",
+                "contacts": [
+                    *_keep(other),
+                    {
+                        "robot_patch": moving,
+                        "surface": f"step{k}",
+                        "type": "support",
+                        "min_radii": [0.02, 0.02],
+                        "maximize_area": 10.0,
+                    },
+                ],
+            }
+        )
+        moving, other = other, moving
+    return {
+        "name": "stairs",
+        "description": (
+            f"steps {depth:.2f} m deep for a {size.sole_length:.2f} m sole, rise {rise:.2f} m; "
+            "contact ellipses maximized against the risers"
+        ),
+        "robot": robot_spec(robot),
+        "mu": 0.7,
+        "surfaces": [GROUND, *surfaces],
+        "obstacles": [],
+        "initial": {"base": [0.0, 0.0, 0.0]},
+        "options": COMMON_OPTIONS,
+        "costs": CLIMB_COSTS,
+        "stages": stages,
+    }
+
+
+def _rail_rpy(alpha: float) -> tuple[float, float, float]:
+    """rpy of a surface whose x axis climbs at ``alpha`` in the x-z plane (normal up-back)."""
+    return (0.0, -alpha, 0.0)
+
+
+def ladder_inclined(robot: str, steps: int = 1) -> dict[str, Any]:
+    """Paper V-A: an inclined ladder (60°) with 12 cm steps every 20 cm and two guardrails.
+    The right foot goes on step 1 and the right hand on the right guardrail (both then fixed,
+    bearing forces); the left foot goes on step 2 as a geometric contact whose ellipse radii
+    are at least 40 % of the step's width (its depth, 12 cm)."""
+    size = robot_size(robot)
+    alpha, rise, depth, width = math.radians(60.0), 0.2, 0.12, 0.5
+    x0 = 0.5 * size.sole_length + 0.2
+    n_steps = 2 * max(1, steps) + 2
+    surfaces = [GROUND]
+    for k in range(1, n_steps + 1):
+        s = rect(f"step{k}", [x0 + k * rise / math.tan(alpha), 0.0, k * rise], (depth, width))
+        s["thickness"] = 0.03
+        surfaces.append(s)
+    rail_h = 0.55 * size.shoulder_height  # rail height above the steps' front line
+    rail_len = 3.0
+    for side, y in (("left", width / 2 + 0.04), ("right", -width / 2 - 0.04)):
+        # the rail's centre line climbs from (x0, rail_h), above the ladder's foot
+        xc = x0 + 0.5 * rail_len * math.cos(alpha)
+        zc = rail_h + 0.5 * rail_len * math.sin(alpha)
+        s = rect(f"{side}_rail", [xc, y, zc], (rail_len, 0.05), _rail_rpy(alpha))
+        s["thickness"] = 0.04
+        surfaces.append(s)
+    geo = {"type": "geometric", "min_radii": [0.4 * depth, 0.4 * depth]}
+    stages: list[dict[str, Any]] = [
+        {"name": "stand", "contacts": _feet_on_ground()},
+        {
+            "name": "right foot on step 1",
+            "contacts": [
+                *_keep("left_sole"),
+                {"robot_patch": "right_sole", "surface": "step1", "type": "support"},
+            ],
+        },
+        {
+            "name": "right hand on the right rail",
+            "contacts": [
+                *_keep("left_sole", "right_sole"),
+                {"robot_patch": "right_hand", "surface": "right_rail", "type": "support"},
+            ],
+        },
+        {
+            "name": "left foot on step 2",
+            "contacts": [
+                *_keep("right_sole", "right_hand"),
+                {"robot_patch": "left_sole", "surface": "step2", **geo},
+            ],
+        },
+    ]
+    return {
+        "name": "ladder-inclined",
+        "description": "inclined ladder (60°): left foot to step 2, ellipse radii >= 40 % of "
+        "the step's width",
+        "robot": robot_spec(robot),
+        "mu": 0.7,
+        "surfaces": surfaces,
+        "obstacles": [],
+        "initial": {"base": [0.0, 0.0, 0.0]},
+        "options": COMMON_OPTIONS,
+        "costs": CLIMB_COSTS,
+        "stages": stages,
+    }
+
+
+RUNG_SPACING = 0.25  # [m]
+RUNG_THICKNESS = 0.025  # [m]
+
+
+def _foot_on_rung(patch: str, k: int, geometric: bool) -> dict[str, Any]:
+    c: dict[str, Any] = {"robot_patch": patch, "surface": f"rung{k}"}
+    if geometric:
+        # the ellipse spans the rung's thickness and a good part of the foot's width
+        c.update({"type": "geometric", "min_radii": [0.3 * RUNG_THICKNESS, 0.04]})
+    else:
+        c.update({"type": "support", "min_radii": [0.3 * RUNG_THICKNESS, 0.03]})
+    return c
+
+
+def ladder_vertical(robot: str, steps: int = 0) -> dict[str, Any]:
+    """Paper V-B: a vertical ladder with 2.5 cm thick rungs every 25 cm. The right foot stands
+    on rung 1 and both hands hold a rung at shoulder height (fixed); the left foot goes on
+    rung 2 as a geometric contact whose ellipse spans the foot's width and the rung's
+    thickness. With ``steps`` = K > 0 the climb goes on: each foot climbs K more rungs, the
+    hands moving up one rung after each foot."""
+    size = robot_size(robot)
+    xl = 0.5 * size.sole_length + 0.2
+    hand_rung = max(3, round(size.shoulder_height / RUNG_SPACING))
+    n_rungs = hand_rung + 2 * max(0, steps) + 2
+    surfaces = [GROUND]
+    for k in range(1, n_rungs + 1):
+        s = rect(f"rung{k}", [xl, 0.0, k * RUNG_SPACING], (RUNG_THICKNESS, 0.45))
+        s["thickness"] = RUNG_THICKNESS
+        surfaces.append(s)
+    obstacles = [
+        box(f"{side}_stile", [xl, y, 1.6], [0.03, 0.04, 3.2])
+        for side, y in (("left", 0.26), ("right", -0.26))
+    ]
+    hand = {"type": "support", "min_radii": [0.3 * RUNG_THICKNESS, 0.03]}
+    stages: list[dict[str, Any]] = [
+        {"name": "stand", "contacts": _feet_on_ground()},
+        {
+            "name": "right foot on rung 1",
+            "contacts": [*_keep("left_sole"), _foot_on_rung("right_sole", 1, False)],
+        },
+        {
+            "name": f"right hand on rung {hand_rung}",
+            "contacts": [
+                *_keep("left_sole", "right_sole"),
+                {"robot_patch": "right_hand", "surface": f"rung{hand_rung}", **hand},
+            ],
+        },
+        {
+            "name": f"left hand on rung {hand_rung}",
+            "contacts": [
+                *_keep("left_sole", "right_sole", "right_hand"),
+                {"robot_patch": "left_hand", "surface": f"rung{hand_rung}", **hand},
+            ],
+        },
+        {
+            "name": "left foot on rung 2",
+            "contacts": [
+                *_keep("right_sole", "right_hand", "left_hand"),
+                _foot_on_rung("left_sole", 2, True),
+            ],
+        },
+    ]
+    feet = {"left_sole": 2, "right_sole": 1}
+    hands = {"left_hand": hand_rung, "right_hand": hand_rung}
+    for _ in range(max(0, steps)):
+        for foot, other in (("right_sole", "left_sole"), ("left_sole", "right_sole")):
+            feet[foot] += 2
+            stages.append(
+                {
+                    "name": f"{foot.split('_')[0]} foot on rung {feet[foot]}",
+                    "contacts": [
+                        *_keep(other, "right_hand", "left_hand"),
+                        _foot_on_rung(foot, feet[foot], True),
+                    ],
+                }
+            )
+            for h, o in (("right_hand", "left_hand"), ("left_hand", "right_hand")):
+                hands[h] += 1
+                stages.append(
+                    {
+                        "name": f"{h.replace('_', ' ')} on rung {hands[h]}",
+                        "contacts": [
+                            *_keep("left_sole", "right_sole", o),
+                            {"robot_patch": h, "surface": f"rung{hands[h]}", **hand},
+                        ],
+                    }
+                )
+    return {
+        "name": "ladder-vertical",
+        "description": "vertical ladder, 2.5 cm rungs: left foot to rung 2 (geometric) with "
+        "the right foot and both hands fixed",
+        "robot": robot_spec(robot),
+        "mu": 0.7,
+        "surfaces": surfaces,
+        "obstacles": obstacles,
+        "initial": {"base": [0.0, 0.0, 0.0]},
+        "options": COMMON_OPTIONS,
+        "costs": CLIMB_COSTS,
+        "stages": stages,
+    }
+
+
+@dataclass(frozen=True)
+class SceneInfo:
+    """A shipped scene: its builder, default robot, and demo/climb step counts."""
+
+    build: Callable[[str, int], dict[str, Any]]
+    robot: str
+    demo_steps: int
+    climb_steps: int | None  # None: not a climb
+    description: str
+
+
+SCENES: dict[str, SceneInfo] = {
+    "stand-reach": SceneInfo(stand_reach, "talos", 1, None, "both feet fixed, hand at a target"),
+    "wall-brace": SceneInfo(
+        wall_brace, "talos", 1, None, "left hand braced on a wall, right hand reaching far"
+    ),
+    "ladder-inclined": SceneInfo(
+        ladder_inclined, "hrp2", 1, None, "paper V-A: inclined ladder, foot to step 2"
+    ),
+    "ladder-vertical": SceneInfo(
+        ladder_vertical, "hrp2", 0, 2, "paper V-B: vertical ladder, 2.5 cm rungs"
+    ),
+    "stairs": SceneInfo(stairs, "atlas", 3, 4, "paper V-C: steps shorter than the foot"),
+}
+
+
+def scene(name: str, robot: str | None = None, steps: int | None = None) -> dict[str, Any]:
+    """The sequence dict of a shipped scene (``steps`` None: its demo)."""
+    if name not in SCENES:
+        raise InputError("scene", f"unknown scene '{name}'", f"use one of: {', '.join(SCENES)}")
+    info = SCENES[name]
+    return info.build(robot or info.robot, info.demo_steps if steps is None else steps)
