@@ -1027,7 +1027,7 @@ def viewer_html(views: Sequence[StanceView], files: Sequence[str], title: str) -
     scale = _force_scale(views)
     centre = (lo + hi) / 2
     radius = 0.5 * float(np.linalg.norm(hi - lo))
-    eye = centre + 0.85 * radius / math.sin(math.radians(15)) * _view_direction(
+    eye = centre + 1.05 * radius / math.sin(math.radians(15)) * _view_direction(
         _base_yaw(views[0].posture) + VIEW_AZIMUTH, VIEW_ELEVATION
     )
     data = {
