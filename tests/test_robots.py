@@ -144,9 +144,9 @@ def test_patches_lie_on_the_collision_geometry(name):
         v = patch.polygon.vertices
         out = worst_outside(hull, v)
         assert out <= HULL_TOL, f"{name}.{p}: a vertex {out * 1e3:.1f} mm off the touching face"
-        # the check has teeth: the polygon moved 2 cm in the plane, or the plane moved 2 cm
-        # along the normal, fails it
-        # (in at least 7 of 8 directions: a triangle moved towards its apex may still fit)
+        # the check has teeth: the polygon moved 2 cm in the plane fails it (in at least 7 of
+        # 8 directions: a triangle moved towards its sharp apex may still fit), and so does the
+        # plane moved 2 cm along its normal (inwards: geometry beyond; outwards: no contact)
         angles = np.radians(np.arange(0, 360, 45))
         shifts = 0.02 * np.c_[np.cos(angles), np.sin(angles)]
         caught = [worst_outside(hull, v + s) > HULL_TOL for s in shifts]

@@ -105,12 +105,14 @@ GROUND = rect("ground", [0.0, 0.0, 0.0], (3.0, 3.0))
 @dataclass(frozen=True)
 class RobotSize:
     """Numbers that scale a scene to a robot [m]: sole length and width, leg length (sole to
-    hip), shoulder height above the soles, all at the default posture."""
+    hip), shoulder height above the soles, and half the distance between the soles, all at
+    the default posture."""
 
     sole_length: float
     sole_width: float
     hip_height: float
     shoulder_height: float
+    stance_half_width: float
 
 
 def robot_size(robot_name: str) -> RobotSize:
@@ -132,11 +134,16 @@ def robot_size(robot_name: str) -> RobotSize:
     while j > 1:
         leg.append(j)
         j = model.parents[j]
+    y_left = data.oMf[robot.patch("left_sole").frame_id].translation[1]
+    y_right = data.oMf[sole.frame_id].translation[1]
     return RobotSize(
         float(np.ptp(v[:, 0])),
         float(np.ptp(v[:, 1])),
         float(max(data.oMi[k].translation[2] for k in leg) - z_sole),
         float(max(heights) - z_sole),
+        # the feet where the default posture has them (at least 10 cm apart from the middle):
+        # a narrower stance can push the legs' proxies into each other
+        float(max(0.1, abs(y_left - y_right) / 2)),
     )
 
 
@@ -187,7 +194,7 @@ def stand_reach(robot: str, steps: int = 1) -> dict[str, Any]:
         "stages": [
             {
                 "name": "reach",
-                "contacts": _feet_on_ground(),
+                "contacts": _feet_on_ground(half_width=size.stance_half_width),
                 "tasks": [{"type": "position", "frame": frame, "target": target}],
             }
         ],
@@ -220,7 +227,7 @@ def wall_brace(robot: str, steps: int = 1) -> dict[str, Any]:
             {
                 "name": "brace and reach",
                 "contacts": [
-                    *_feet_on_ground(),
+                    *_feet_on_ground(half_width=size.stance_half_width),
                     {
                         "robot_patch": "left_hand",
                         "surface": "wall",
@@ -264,7 +271,9 @@ def stairs(robot: str, steps: int = 2) -> dict[str, Any]:
     surfaces = _steps_geometry(
         n + 1, 0.5 * size.sole_length + 0.25, rise, depth, 0.8, 2.2 * size.sole_length
     )
-    stages: list[dict[str, Any]] = [{"name": "stand", "contacts": _feet_on_ground()}]
+    stages: list[dict[str, Any]] = [
+        {"name": "stand", "contacts": _feet_on_ground(half_width=size.stance_half_width)}
+    ]
     moving, other = "right_sole", "left_sole"
     for k in range(1, n + 1):
         stages.append(
@@ -330,7 +339,7 @@ def ladder_inclined(robot: str, steps: int = 1) -> dict[str, Any]:
         surfaces.append(s)
     geo = {"type": "geometric", "min_radii": [0.4 * depth, 0.4 * depth]}
     stages: list[dict[str, Any]] = [
-        {"name": "stand", "contacts": _feet_on_ground()},
+        {"name": "stand", "contacts": _feet_on_ground(half_width=size.stance_half_width)},
         {
             "name": "right foot on step 1",
             "contacts": [
@@ -403,7 +412,7 @@ def ladder_vertical(robot: str, steps: int = 0) -> dict[str, Any]:
     ]
     hand = {"type": "support", "min_radii": [0.3 * RUNG_THICKNESS, 0.03]}
     stages: list[dict[str, Any]] = [
-        {"name": "stand", "contacts": _feet_on_ground()},
+        {"name": "stand", "contacts": _feet_on_ground(half_width=size.stance_half_width)},
         {
             "name": "right foot on rung 1",
             "contacts": [*_keep("left_sole"), _foot_on_rung("right_sole", 1, False)],
