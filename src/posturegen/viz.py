@@ -50,7 +50,7 @@ VIEW_AZIMUTH = -35.0  # the camera, from the robot's heading [deg] (front, robot
 VIEW_ELEVATION = 18.0  # [deg]
 PNG_CELL = 0.012  # decimation cell of the figure's meshes [m]
 HTML_CELL = 0.006  # decimation cell of the viewer's meshes [m]
-SLAB = 0.03  # thickness drawn under a small support surface (a step, a rung) [m]
+SLAB = 0.02  # thickness of a surface's solid when the posture file does not give it [m]
 
 ROBOT_RGB = (0.70, 0.72, 0.75)
 PATCH_COLOR = "#1a9a3a"  # robot patch: green
@@ -401,7 +401,7 @@ class StanceView:
     meshes: RobotMeshes
     part_poses: list[np.ndarray]  # (4, 4) per mesh part
     contacts: list[ContactView]
-    surfaces: list[tuple[str, np.ndarray, np.ndarray]]  # name, T_ws, (k, 2) vertices
+    surfaces: list[tuple[str, np.ndarray, np.ndarray, float]]  # name, T_ws, (k, 2), thickness
     obstacles: list[tuple[str, np.ndarray, np.ndarray]]  # name, full size (3,), T_wb
     targets: list[tuple[str, np.ndarray]]
     weight: float  # [N]
@@ -435,15 +435,17 @@ def stance_view(
         where = f"contacts[{i}]"
         try:
             contacts.append(_contact_view(c, model, data, where))
-            s = c["surface"]
-            surfaces.setdefault(s["name"], (s["name"], contacts[-1].T_ws, contacts[-1].surface2d))
+            s, cv = c["surface"], contacts[-1]
+            thick = float(s.get("thickness", SLAB))
+            surfaces.setdefault(s["name"], (s["name"], cv.T_ws, cv.surface2d, thick))
         except InputError:
             raise
         except (KeyError, TypeError, ValueError, IndexError) as exc:
             raise InputError(where, f"malformed contact ({exc})", "give a posture file") from exc
     for s in posture.get("surfaces") or []:  # the whole scene, when the file has it
         T = _se3(s["placement"], f"surfaces[{s.get('name')}].placement")
-        surfaces.setdefault(s["name"], (s["name"], T, np.asarray(s["vertices"], dtype=float)))
+        verts = np.asarray(s["vertices"], dtype=float)
+        surfaces.setdefault(s["name"], (s["name"], T, verts, float(s.get("thickness", SLAB))))
     obstacles = [
         (
             str(o.get("name", "")),
@@ -575,14 +577,30 @@ def _surface_edges(
     return edges
 
 
+def _quad_tiles(a: np.ndarray, b: np.ndarray, d: np.ndarray, step: float) -> list[np.ndarray]:
+    """Triangles (3, 3) covering the parallelogram a, b, b + d - a, d, cut in cells of about
+    ``step`` so that the painter's algorithm sorts them sensibly."""
+    nu = max(1, math.ceil(float(np.linalg.norm(b - a)) / step))
+    nv = max(1, math.ceil(float(np.linalg.norm(d - a)) / step))
+    out = []
+    for i in range(nu):
+        for j in range(nv):
+            p = [
+                a + (b - a) * u / nu + (d - a) * v / nv
+                for u, v in ((i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1))
+            ]
+            out += [np.array(p[:3]), np.array([p[0], p[2], p[3]])]
+    return out
+
+
 def _scene_triangles(
     sv: StanceView, lo: np.ndarray, hi: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """World triangles (k, 3, 3) and base colours (k, 3) of the surfaces (clipped to the box
-    [lo, hi]; a small one drawn as a slab) and the obstacles."""
+    [lo, hi]; a small one with the sides of its solid) and the obstacles."""
     tris, cols = [], []
     in_contact = {c.surface for c in sv.contacts}
-    for name, T, verts in sv.surfaces:
+    for name, T, verts, thickness in sv.surfaces:
         clipped = _clip_polygon(verts, *_local_rect(T, lo, hi))
         if clipped is None:
             continue
@@ -593,27 +611,20 @@ def _scene_triangles(
             cols.append(rgb)
         if float(np.ptp(verts, axis=0).max()) < 1.5:  # a step or a rung: its sides
             top = _lift(verts)
-            bottom = top - [0, 0, SLAB]
+            bottom = top - [0, 0, thickness]
             for i in range(len(verts)):
                 j = (i + 1) % len(verts)
-                quad = np.array([top[i], top[j], bottom[j], bottom[i]])
-                tris += [_apply(T, quad[[0, 1, 2]]), _apply(T, quad[[0, 2, 3]])]
-                cols += [np.multiply(SCENE_RGB, 0.85)] * 2
+                side = _quad_tiles(top[i], top[j], bottom[i], 0.1)
+                tris += [_apply(T, t) for t in side]
+                cols += [np.multiply(rgb, 0.85)] * len(side)
     faces = ((0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3))
-    k = 4  # each box face cut in k x k for depth sorting
     for _, size, T in sv.obstacles:
         V = _box_mesh(size / 2)[0]
         for face in faces:
             a, b, _, d = (V[i] for i in face)
-            for i in range(k):
-                for j in range(k):
-                    u0, u1, v0, v1 = i / k, (i + 1) / k, j / k, (j + 1) / k
-                    p = [
-                        a + (b - a) * u + (d - a) * v
-                        for u, v in ((u0, v0), (u1, v0), (u1, v1), (u0, v1))
-                    ]
-                    tris += [_apply(T, np.array(p[:3])), _apply(T, np.array([p[0], p[2], p[3]]))]
-                    cols += [OBSTACLE_RGB, OBSTACLE_RGB]
+            pieces = _quad_tiles(a, b, d, max(float(size.max()) / 4, 0.05))
+            tris += [_apply(T, t) for t in pieces]
+            cols += [OBSTACLE_RGB] * len(pieces)
     if not tris:
         return np.zeros((0, 3, 3)), np.zeros((0, 3))
     return np.array(tris), np.array(cols, dtype=float)
@@ -818,7 +829,7 @@ def _draw_closeup(ax: Any, c: ContactView, scale2d: float) -> None:
                 zorder=6,
             )
         for (x, y), f in zip(p2, fn, strict=True):
-            if f > 0.02 * fn.max():
+            if f > max(0.02 * fn.max(), 0.5):  # [N]
                 ax.annotate(
                     f"{f:.0f} N",
                     (x, y),
@@ -933,13 +944,13 @@ def _scene_blob(sv: StanceView) -> dict[str, Any]:
     soups: base64 float32 positions, uint8 RGB per vertex for the surfaces."""
     in_contact = {c.surface for c in sv.contacts}
     tris, cols = [], []
-    for name, T, verts in sv.surfaces:
+    for name, T, verts, thickness in sv.surfaces:
         rgb = CONTACT_SURFACE_RGB if name in in_contact else SCENE_RGB
         top = _lift(verts)
         tris += [_apply(T, top[[0, i, i + 1]]) for i in range(1, len(top) - 1)]
         cols += [rgb] * (len(top) - 2)
         if float(np.ptp(verts, axis=0).max()) < 1.5:
-            bottom = top - [0, 0, SLAB]
+            bottom = top - [0, 0, thickness]
             tris += [_apply(T, bottom[[0, i + 1, i]]) for i in range(1, len(top) - 1)]
             cols += [rgb] * (len(top) - 2)
             for i in range(len(top)):
@@ -1081,9 +1092,8 @@ def write_html(
         data = read_json(path)
         if is_sequence(data):
             items = [(n, p, f.name) for n, p, f in load_sequence(path)]
-            title = (
-                f"{items[0][1]['robot'].get('name', 'robot')} — {path.name} ({len(items)} stances)"
-            )
+            robot, n = items[0][1]["robot"].get("name", "robot"), len(items)
+            title = f"{robot} — {path.name} ({n} stance{'s' if n > 1 else ''})"
         else:
             items = [(path.stem, load_posture_any(path), path.name)]
             title = f"{items[0][1]['robot'].get('name', 'robot')} — {path.name}"
