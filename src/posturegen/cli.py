@@ -119,12 +119,12 @@ def _run_sequence(seq: dict, out: Path, quiet: bool, png: str | None, final: boo
     import shutil
     import time
 
-    from .sequence import run_sequence
+    from .sequence import StageReport, run_sequence
 
     robot = seq["robot"] if isinstance(seq["robot"], str) else seq["robot"].get("name")
     t_start = time.perf_counter()
 
-    def progress(k: int, n: int, name: str, rep: object) -> None:
+    def progress(k: int, n: int, name: str, rep: StageReport | None) -> None:
         if quiet:
             return
         done = k + (1 if rep is not None else 0)
@@ -134,11 +134,11 @@ def _run_sequence(seq: dict, out: Path, quiet: bool, png: str | None, final: boo
             line = f"[{bar}] {k + 1}/{n} {name} ..."
             print(f"\r{line:<100}", end="", flush=True, file=sys.stderr)
             return
-        r = rep.result  # type: ignore[attr-defined]
+        r = rep.result
         state = "ok" if r.success else "FAILED"
         line = (
             f"[{bar}] {k + 1}/{n} {name}: {state}, {r.iterations} it, IPOPT "
-            f"{1e3 * r.solve_time_s:.0f} ms, stage {rep.wall_time_s:.1f} s, "  # type: ignore[attr-defined]
+            f"{1e3 * r.solve_time_s:.0f} ms, stage {rep.wall_time_s:.1f} s, "
             f"total {elapsed:.1f} s"
         )
         print(f"\r{line:<100}", file=sys.stderr, flush=True)

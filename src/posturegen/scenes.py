@@ -124,23 +124,23 @@ def robot_size(robot_name: str) -> RobotSize:
     v = sole.polygon.vertices
     z_sole = data.oMf[sole.frame_id].translation[2]
     hand = robot.patch("right_hand")
-    # the hand's kinematic chain: its highest joint below the torso is the shoulder
-    chain, j = [], hand.joint_id
-    while j > 1:
-        chain.append(j)
-        j = model.parents[j]
-    heights = [data.oMi[k].translation[2] for k in chain]
-    leg, j = [], sole.joint_id
-    while j > 1:
-        leg.append(j)
-        j = model.parents[j]
+
+    def top_of_chain(j: int) -> float:
+        """Height of the highest joint between joint j and the root (the shoulder of a hand,
+        the hip of a foot) [m]."""
+        z = -np.inf
+        while j > 1:
+            z = max(z, float(data.oMi[j].translation[2]))
+            j = model.parents[j]
+        return z
+
     y_left = data.oMf[robot.patch("left_sole").frame_id].translation[1]
     y_right = data.oMf[sole.frame_id].translation[1]
     return RobotSize(
         float(np.ptp(v[:, 0])),
         float(np.ptp(v[:, 1])),
-        float(max(data.oMi[k].translation[2] for k in leg) - z_sole),
-        float(max(heights) - z_sole),
+        float(top_of_chain(sole.joint_id) - z_sole),
+        float(top_of_chain(hand.joint_id) - z_sole),
         # the feet where the default posture has them (at least 10 cm apart from the middle):
         # a narrower stance can push the legs' proxies into each other
         float(max(0.1, abs(y_left - y_right) / 2)),
@@ -165,7 +165,7 @@ def _feet_on_ground(x: float = 0.0, half_width: float = 0.1) -> list[dict[str, A
 
 
 def _keep(*names: str) -> list[dict[str, Any]]:
-    return [{"name": n, "robot_patch": n, "surface": "-", "type": "keep"} for n in names]
+    return [{"name": n, "type": "keep"} for n in names]
 
 
 CLIMB_COSTS: dict[str, Any] = {"posture": 1.0, "posture_reference": "default", "forces": 1.0}

@@ -36,8 +36,8 @@ from .problem import Problem
 from .robot import load_robot
 from .solve import Result, solve
 from .spec import problem_from_dict
+from .verify import SEQUENCE_SCHEMA
 
-SEQUENCE_SCHEMA = "posturegen.sequence/1"
 _SCENE_KEYS = ("robot", "mu", "surfaces", "obstacles", "friction", "costs")
 
 

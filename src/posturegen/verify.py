@@ -28,6 +28,7 @@ from .errors import InputError
 from .geometry import ConvexPolygon, Ellipse
 
 SCHEMA = "posturegen.posture/1"
+SEQUENCE_SCHEMA = "posturegen.sequence/1"  # climbs: see posturegen.sequence
 
 # Tolerances of the re-check. Lengths [m], angles [rad], forces relative to the weight.
 TOL_JOINT = 1e-6  # [rad] or [m]
@@ -332,19 +333,24 @@ def _ellipse_outside(
     return out
 
 
-def load_posture(path: str | Path) -> dict[str, Any]:
-    """Read a posture file and check its schema and required fields."""
+def read_json(path: str | Path, missing_fix: str, invalid_fix: str) -> Any:
+    """The parsed JSON of a file, or an InputError naming the file (``missing_fix`` when it
+    does not exist, ``invalid_fix`` when it is not JSON)."""
     path = Path(path)
     try:
-        data = json.loads(path.read_text())
+        return json.loads(path.read_text())
     except FileNotFoundError as exc:
-        raise InputError(str(path), "no such file", "give the path of a posture.json") from exc
+        raise InputError(str(path), "no such file", missing_fix) from exc
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(str(path), "cannot read it", "check the path") from exc
     except json.JSONDecodeError as exc:
-        raise InputError(
-            str(path), f"invalid JSON at line {exc.lineno}", "give a posture file"
-        ) from exc
+        raise InputError(str(path), f"invalid JSON at line {exc.lineno}", invalid_fix) from exc
+
+
+def load_posture(path: str | Path) -> dict[str, Any]:
+    """Read a posture file and check its schema and required fields."""
+    path = Path(path)
+    data = read_json(path, "give the path of a posture.json", "give a posture file")
     if not isinstance(data, dict) or data.get("schema") != SCHEMA:
         raise InputError(
             f"{path}: schema", f'expected "{SCHEMA}"', "give a file written by posturegen solve"

@@ -43,8 +43,9 @@ import numpy as np
 import pinocchio as pin
 
 from .errors import InputError
+from .verify import SCHEMA, SEQUENCE_SCHEMA, load_posture
+from .verify import read_json as read_json_file
 
-SEQUENCE_SCHEMA = "posturegen.sequence/1"
 MESH_KINDS = ("visual", "collision")
 VIEW_AZIMUTH = -35.0  # the camera, from the robot's heading [deg] (front, robot's right side)
 VIEW_ELEVATION = 18.0  # [deg]
@@ -65,8 +66,6 @@ OBSTACLE_RGB = (0.62, 0.70, 0.80)
 # --------------------------------------------------------------------------- input
 def load_posture_any(posture: str | Path | dict[str, Any]) -> dict[str, Any]:
     """A posture dict from a posture file path or a dict (both checked like ``verify``)."""
-    from .verify import SCHEMA, load_posture
-
     if isinstance(posture, dict):
         if posture.get("schema") != SCHEMA:
             raise InputError("posture: schema", f'expected "{SCHEMA}"', "give a posture dict")
@@ -79,17 +78,7 @@ def load_posture_any(posture: str | Path | dict[str, Any]) -> dict[str, Any]:
 
 def read_json(path: str | Path) -> dict[str, Any]:
     """A JSON object from a file, or an InputError naming the file."""
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError as exc:
-        raise InputError(str(path), "no such file", "give a posture or sequence file") from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(str(path), "cannot read it", "check the path") from exc
-    except json.JSONDecodeError as exc:
-        raise InputError(
-            str(path), f"invalid JSON at line {exc.lineno}", "give a JSON file"
-        ) from exc
+    data = read_json_file(path, "give a posture or sequence file", "give a JSON file")
     if not isinstance(data, dict):
         raise InputError(str(path), "not a JSON object", "give a posture or sequence file")
     return data
