@@ -1,9 +1,9 @@
 """Collision avoidance (paper eq. 1, rows 3-4) with smooth conservative sphere proxies.
 
 Proxies: each joint's collision geometry (all meshes and primitives rigidly attached to it) is
-covered by 1-8 spheres (k-means clusters of its vertices, each radius the farthest vertex of
-its cluster); every vertex of every mesh lies in a sphere (tested). They are fitted once per
-robot and cached on disk.
+covered by 1-8 spheres (up to 40 of radius <= 3 cm on links carrying a sole patch), k-means
+clusters of its vertices, each radius the farthest vertex of its cluster; every vertex of
+every mesh lies in a sphere (tested). They are fitted once per robot and cached on disk.
 
 Distances, as smooth CasADi expressions:
 
@@ -38,11 +38,11 @@ from .errors import InputError, ModelError
 from .problem import BuildContext, Problem, Term
 from .robot import Robot
 
-PROXY_VERSION = 3
+PROXY_VERSION = 4
 BETA = 300.0  # [1/m] sharpness of the smooth max over box faces
 MAX_SPHERES = 8
-MAX_SPHERES_PATCH = 40
-PATCH_SPHERE_RADIUS = 0.03  # [m] largest proxy radius on a link that carries a sole patch
+MAX_SPHERES_SOLE = 40
+SOLE_SPHERE_RADIUS = 0.03  # [m] largest proxy radius on a link carrying a sole patch
 CYLINDER_SIDES = 16
 
 
@@ -152,9 +152,7 @@ class ProxyModel:
 
 def _urdf_key(robot: Robot) -> str:
     h = hashlib.sha1()
-    h.update(
-        f"v{PROXY_VERSION}/soles/{MAX_SPHERES}/{MAX_SPHERES_PATCH}/{PATCH_SPHERE_RADIUS}".encode()
-    )
+    h.update(f"v{PROXY_VERSION}/{MAX_SPHERES}/{MAX_SPHERES_SOLE}/{SOLE_SPHERE_RADIUS}".encode())
     h.update(
         repr(
             sorted((p.frame, p.T_frame_patch.homogeneous.tobytes()) for p in robot.patches.values())
@@ -174,11 +172,11 @@ def _fit(robot: Robot) -> list[Sphere]:
     # feet stand on the scene: finer proxies keep the spheres from bulging far past the sole
     # (Talos: 7.7 -> 1.9 cm below it), so a foot can stand next to a riser. On the hands they
     # made the box test infeasible (36 small spheres on the Talos wrist), so soles only.
-    patch_joints = {p.joint_id for n, p in robot.patches.items() if n.endswith("sole")}
+    sole_joints = {p.joint_id for n, p in robot.patches.items() if n.endswith("sole")}
     spheres = []
     for jid, pts in sorted(per_joint.items()):
-        if jid in patch_joints:
-            fitted = fit_spheres(np.vstack(pts), MAX_SPHERES_PATCH, PATCH_SPHERE_RADIUS)
+        if jid in sole_joints:
+            fitted = fit_spheres(np.vstack(pts), MAX_SPHERES_SOLE, SOLE_SPHERE_RADIUS)
         else:
             fitted = fit_spheres(np.vstack(pts))
         for c, r in fitted:
