@@ -284,7 +284,7 @@ FAMILIES: dict[str, tuple[str, Callable[[int, int], Iterator[Problem]]]] = {
         box_family(True),
     ),
     "talos-step-short-support": (
-        "right foot on a step 8-16 cm deep (foot 20 cm): geometric contact, support form",
+        "right foot on a step 8-16 cm deep (sole patch 18.5 cm): geometric contact, support form",
         step_family(_SHORT, {**_GEOM, "formulation": "support"}),
     ),
     "talos-step-short-paper": (
