@@ -4,6 +4,7 @@ gradients, and postures that collide without the rows do not with them (coal on 
 from __future__ import annotations
 
 import copy
+import dataclasses
 
 import casadi as ca
 import numpy as np
@@ -15,6 +16,8 @@ from posturegen import problem_from_dict, solve
 from posturegen.cli import _demo_dir
 from posturegen.collision import (
     BETA,
+    MAX_SPHERE_RADIUS,
+    MAX_SPHERES,
     fit_spheres,
     geometry_points,
     proxy_model,
@@ -60,7 +63,10 @@ def test_fit_spheres_cover_random_clouds():
         spheres = fit_spheres(pts)
         d = np.min([np.linalg.norm(pts - c, axis=1) - r for c, r in spheres], axis=0)
         assert np.all(d <= 1e-9)
-        assert 1 <= len(spheres) <= 8
+        assert 1 <= len(spheres) <= MAX_SPHERES
+        # the radius cap holds unless every allowed sphere was used
+        radii = [r for _, r in spheres]
+        assert max(radii) <= MAX_SPHERE_RADIUS or len(spheres) == MAX_SPHERES
 
 
 def test_proxies_are_cached_on_disk(tmp_path, monkeypatch):
@@ -188,3 +194,36 @@ def test_verify_file_runs_the_mesh_checks(tmp_path):
     names = {c.name for c in report.checks}
     assert {"collision: self (meshes)", "collision: scene (meshes)"} <= names
     assert report.ok
+
+
+def test_a_failed_active_set_loop_restarts_from_the_collision_free_solution(monkeypatch):
+    """solve(): when the loop fails, the program without collision rows is solved and the
+    loop starts again from its solution; the Result counts every IPOPT run."""
+    import sys
+
+    solve_module = sys.modules["posturegen.solve"]
+    real = solve_module._solve_avoiding
+    calls: list[tuple] = []
+
+    def first_fails(problem, x0, prior):
+        calls.append((x0, len(prior)))
+        if len(calls) == 1:  # stop the first loop after 3 iterations: a failure
+            options = problem.solver_options
+            problem.solver_options = dataclasses.replace(options, max_iter=3)
+            try:
+                return real(problem, x0, prior)
+            finally:
+                problem.solver_options = options
+        return real(problem, x0, prior)
+
+    monkeypatch.setattr(solve_module, "_solve_avoiding", first_fails)
+    data = copy.deepcopy(STAND)
+    data["tasks"][0]["target"] = [0.15, 0.0, 0.95]  # crosses the body without the rows
+    data["options"]["self_collision"] = True
+    result = solve(problem_from_dict(data))
+    assert len(calls) == 2
+    assert calls[0][0] is None and calls[1][0] is not None  # restarted from the relaxed x
+    assert calls[1][1] >= 2  # the failed loop's runs and the relaxed run are counted
+    assert result.success, result.message
+    assert result.posture["ipopt_runs"] >= 3
+    assert result.posture["checks"]["collision: self (meshes)"]["value"] == 0

@@ -173,7 +173,12 @@ def test_initial_joint_mapping_is_validated():
     robot = robot_of("g1")
     q = robot.initial_configuration({"left_knee_joint": 0.4})
     assert q[robot.model.joints[robot.model.getJointId("left_knee_joint")].idx_q] == 0.4
-    assert q[2] == 0.0 and np.allclose(q[3:7], [0, 0, 0, 1])
+    # the neutral base orientation, raised so that the lowest sole vertex is at z = 0
+    assert np.allclose(q[0:2], 0.0) and np.allclose(q[3:7], [0, 0, 0, 1])
+    data = robot.model.createData()
+    pin.forwardKinematics(robot.model, data, q)
+    lowest = min(sole_world(robot, data, s)[:, 2].min() for s in ("left_sole", "right_sole"))
+    assert q[2] > 0.5 and lowest == pytest.approx(0.0, abs=1e-12)
     with pytest.raises(InputError, match="options.initial.left_paw: robot 'g1' has no actuated"):
         robot.initial_configuration({"left_paw": 0.1}, "options.initial")
     with pytest.raises(InputError, match="outside the joint limits"):
@@ -238,3 +243,25 @@ def test_hand_patch_rests_on_a_table(name, height):
     result = solve(problem_from_dict(data))
     assert result.success, result.message
     assert result.verification.ok, result.verification.summary()
+
+
+@pytest.mark.parametrize("name", sorted(ROBOTS))
+def test_default_posture_stands_on_the_ground(name):
+    """Every robot's default posture has its lowest sole vertex at z = 0 (a URDF root at the
+    origin would put the feet under the ground, and a solver started there can settle in a
+    crouch: HRP-2 ended 0.26 m high instead of 0.65), with both soles level."""
+    robot = robot_of(name)
+    data = robot.model.createData()
+    pin.forwardKinematics(robot.model, data, robot.q_init)
+    z = np.concatenate([sole_world(robot, data, s)[:, 2] for s in ("left_sole", "right_sole")])
+    assert z.min() == pytest.approx(0.0, abs=2e-4)  # Talos: its SRDF base height, 1.01927 m
+    assert z.max() < 0.01  # the soles are flat on the ground, not only their lowest corner
+
+
+def test_an_explicit_initial_configuration_is_kept_as_given():
+    robot = robot_of("hrp2")
+    q = robot.q_init.copy()
+    q[0:3] = 0.0  # a user's own base placement, even under the ground, is not moved
+    np.testing.assert_array_equal(robot.initial_configuration(q.tolist()), q)
+    lifted = robot.initial_configuration("half_sitting")  # a named posture stands on z = 0
+    assert lifted[2] == pytest.approx(robot.q_init[2], abs=1e-12) and lifted[2] > 0.6

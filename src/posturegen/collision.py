@@ -1,7 +1,8 @@
 """Collision avoidance (paper eq. 1, rows 3-4) with smooth conservative sphere proxies.
 
 Proxies: each joint's collision geometry (all meshes and primitives rigidly attached to it) is
-covered by 1-8 spheres (up to 40 of radius <= 3 cm on links carrying a sole patch), k-means
+covered by 1-16 spheres of radius <= 10 cm (up to 40 of radius <= 3 cm on links carrying a
+sole patch), k-means
 clusters of its vertices, each radius the farthest vertex of its cluster; every vertex of
 every mesh lies in a sphere (tested). They are fitted once per robot and cached on disk.
 
@@ -38,11 +39,14 @@ from .errors import InputError, ModelError
 from .problem import BuildContext, Problem, Term
 from .robot import Robot
 
-PROXY_VERSION = 4
+PROXY_VERSION = 5
 BETA = 300.0  # [1/m] sharpness of the smooth max over box faces
-MAX_SPHERES = 8
 MAX_SPHERES_SOLE = 40
 SOLE_SPHERE_RADIUS = 0.03  # [m] largest proxy radius on a link carrying a sole patch
+# every other link: spheres of at most 10 cm, up to 16 of them (the HRP-2 chest had 5 spheres
+# of 19 cm, which bulged 10 cm past its box-shaped mesh and kept it off a ladder)
+MAX_SPHERE_RADIUS = 0.10  # [m]
+MAX_SPHERES = 16
 CYLINDER_SIDES = 16
 
 
@@ -86,7 +90,7 @@ def geometry_points(obj: pin.GeometryObject) -> np.ndarray:
 
 
 def fit_spheres(
-    points: np.ndarray, max_spheres: int = MAX_SPHERES, max_radius: float = np.inf
+    points: np.ndarray, max_spheres: int = MAX_SPHERES, max_radius: float = MAX_SPHERE_RADIUS
 ) -> list[tuple[np.ndarray, float]]:
     """Spheres that contain every point of ``points`` (k, 3): k-means clusters (farthest-point
     seeding, 12 Lloyd steps), each radius the farthest point of its cluster. k grows from 1
@@ -152,7 +156,10 @@ class ProxyModel:
 
 def _urdf_key(robot: Robot) -> str:
     h = hashlib.sha1()
-    h.update(f"v{PROXY_VERSION}/{MAX_SPHERES}/{MAX_SPHERES_SOLE}/{SOLE_SPHERE_RADIUS}".encode())
+    h.update(
+        f"v{PROXY_VERSION}/{MAX_SPHERES}/{MAX_SPHERES_SOLE}/{SOLE_SPHERE_RADIUS}"
+        f"/{MAX_SPHERE_RADIUS}".encode()
+    )
     h.update(
         repr(
             sorted((p.frame, p.T_frame_patch.homogeneous.tobytes()) for p in robot.patches.values())
@@ -203,6 +210,26 @@ def _disabled_joint_pairs(robot: Robot) -> set[tuple[int, int]]:
     all_pairs = _joint_pairs(gm)
     pin.removeCollisionPairs(robot.model, gm, str(robot.srdf), False)
     return all_pairs - _joint_pairs(gm)
+
+
+def _meshes_overlapping(robot: Robot, data: pin.Data) -> set[tuple[int, int]]:
+    """Joint pairs (sorted ids, neither the same nor parent and child) whose collision
+    meshes overlap at the reference posture (``data`` holds its kinematics). They cannot be
+    told apart by any posture near it (ATLAS: the pelvis and the glutes' convex hulls), so,
+    like an SRDF's 'Default' pairs, they are not checked."""
+    model = robot.model
+    gm = robot.collision_model().copy()
+    gm.addAllCollisionPairs()
+    gd = gm.createData()
+    pin.updateGeometryPlacements(model, data, gm, gd)
+    pin.computeCollisions(gm, gd, False)
+    out = set()
+    for cp, res in zip(gm.collisionPairs, gd.collisionResults, strict=True):
+        a = int(gm.geometryObjects[cp.first].parentJoint)
+        b = int(gm.geometryObjects[cp.second].parentJoint)
+        if a != b and model.parents[a] != b and model.parents[b] != a and res.isCollision():
+            out.add((min(a, b), max(a, b)))
+    return out
 
 
 def proxy_model(robot: Robot) -> ProxyModel:
@@ -265,6 +292,7 @@ def proxy_model(robot: Robot) -> ProxyModel:
         )
         not in overlapping
     ]
+    overlapping |= _meshes_overlapping(robot, data) - disabled
     excluded = sorted((model.names[a], model.names[b]) for a, b in overlapping)
     pm = ProxyModel(spheres, np.array(pairs, dtype=int).reshape(-1, 2), excluded)
     robot._proxy_model = pm

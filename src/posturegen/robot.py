@@ -112,15 +112,36 @@ class Robot:
             )
         return self.patches[name]
 
+    def on_ground(self, q: np.ndarray) -> np.ndarray:
+        """q (nq,) with its base raised so that the lowest sole-patch vertex is at z = 0, when
+        the base translation q[0:3] is zero (a URDF's root at the origin puts the feet under
+        the ground; a solver started there can settle in a crouch) and the robot has patches
+        named ``*sole``. Any other q is returned unchanged (a copy)."""
+        q = np.array(q, dtype=float)
+        soles = [p for n, p in self.patches.items() if n.endswith("sole")]
+        if not soles or np.any(q[0:3] != 0.0):
+            return q
+        data = self.model.createData()
+        pin.framesForwardKinematics(self.model, data, q)
+        lowest = np.inf
+        for p in soles:
+            T_world_patch = data.oMf[p.frame_id] * p.T_frame_patch
+            v = p.polygon.vertices  # (k, 2) in the patch plane
+            z_world = v @ T_world_patch.rotation[2, :2] + T_world_patch.translation[2]  # (k,)
+            lowest = min(lowest, float(z_world.min()))
+        q[2] = -lowest
+        return q
+
     def initial_configuration(
         self, initial: Any = None, field_name: str = "options.initial"
     ) -> np.ndarray:
         """q (nq,) from a reference-configuration name, a ``{joint: value}`` mapping over the
-        neutral posture, an explicit list of the nq numbers, or the default."""
+        neutral posture, an explicit list of the nq numbers, or the default. Named and mapped
+        postures whose base is at the origin stand on z = 0 (:meth:`on_ground`)."""
         if initial is None:
             return self.q_init.copy()
         if isinstance(initial, Mapping):
-            return self.configuration_from_joints(initial, field_name)
+            return self.on_ground(self.configuration_from_joints(initial, field_name))
         if isinstance(initial, str):
             if initial not in self.reference_configurations:
                 known = ", ".join(sorted(self.reference_configurations)) or "none"
@@ -129,7 +150,7 @@ class Robot:
                     f"unknown reference posture '{initial}'",
                     f"known: {known}, or give the {self.model.nq} numbers of q",
                 )
-            return self.reference_configurations[initial].copy()
+            return self.on_ground(self.reference_configurations[initial])
         q = F.vector(initial, self.model.nq, field_name)
         if abs(np.linalg.norm(q[3:7]) - 1.0) > 1e-6:
             raise InputError(
@@ -288,6 +309,7 @@ def build_robot(
     robot = Robot(name, model, urdf, srdf, package_dirs, patches, q_neutral, refs)
     init = initial if initial is not None else patch_data.get("initial")
     robot.q_init = robot.initial_configuration(init, "initial") if init is not None else q_neutral
+    robot.q_init = robot.on_ground(robot.q_init)
     return robot
 
 

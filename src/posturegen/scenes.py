@@ -105,14 +105,15 @@ GROUND = rect("ground", [0.0, 0.0, 0.0], (3.0, 3.0))
 @dataclass(frozen=True)
 class RobotSize:
     """Numbers that scale a scene to a robot [m]: sole length and width, leg length (sole to
-    hip), shoulder height above the soles, and half the distance between the soles, all at
-    the default posture."""
+    hip), shoulder height above the soles, half the distance between the soles, and the
+    shoulder's distance from the sagittal plane, all at the default posture."""
 
     sole_length: float
     sole_width: float
     hip_height: float
     shoulder_height: float
     stance_half_width: float
+    shoulder_half_width: float
 
 
 def robot_size(robot_name: str) -> RobotSize:
@@ -125,25 +126,27 @@ def robot_size(robot_name: str) -> RobotSize:
     z_sole = data.oMf[sole.frame_id].translation[2]
     hand = robot.patch("right_hand")
 
-    def top_of_chain(j: int) -> float:
-        """Height of the highest joint between joint j and the root (the shoulder of a hand,
-        the hip of a foot) [m]."""
-        z = -np.inf
+    def top_of_chain(j: int) -> np.ndarray:
+        """Position (3,) of the highest joint between joint j and the root (the shoulder of
+        a hand, the hip of a foot) [m]."""
+        top = data.oMi[j].translation
         while j > 1:
-            z = max(z, float(data.oMi[j].translation[2]))
+            if data.oMi[j].translation[2] > top[2]:
+                top = data.oMi[j].translation
             j = model.parents[j]
-        return z
+        return np.array(top)
 
     y_left = data.oMf[robot.patch("left_sole").frame_id].translation[1]
     y_right = data.oMf[sole.frame_id].translation[1]
     return RobotSize(
         float(np.ptp(v[:, 0])),
         float(np.ptp(v[:, 1])),
-        float(top_of_chain(sole.joint_id) - z_sole),
-        float(top_of_chain(hand.joint_id) - z_sole),
+        float(top_of_chain(sole.joint_id)[2] - z_sole),
+        float(top_of_chain(hand.joint_id)[2] - z_sole),
         # the feet where the default posture has them (at least 10 cm apart from the middle):
         # a narrower stance can push the legs' proxies into each other
         float(max(0.1, abs(y_left - y_right) / 2)),
+        float(abs(top_of_chain(hand.joint_id)[1])),
     )
 
 
@@ -309,9 +312,19 @@ def stairs(robot: str, steps: int = 2) -> dict[str, Any]:
     }
 
 
-def _rail_rpy(alpha: float) -> tuple[float, float, float]:
-    """rpy of a surface whose x axis climbs at ``alpha`` in the x-z plane (normal up-back)."""
-    return (0.0, -alpha, 0.0)
+# the rails' hand face turns 75° from up-back towards the ladder's middle (measured: at 0° the
+# HRP-2 hand, whose patch is the back of the hand, cannot lie on it; 45° failed on HRP-2 and
+# 90° on Talos), and the rails clear the shoulders by 20 cm (10 cm let Talos' torso proxies
+# reach them)
+RAIL_TILT = math.radians(75.0)
+RAIL_CLEARANCE = 0.2  # [m]
+LADDER_GAP = 0.255  # [m] from the toes at the start to step 1's front edge
+
+
+def _rail_rpy(alpha: float, inward: float) -> tuple[float, float, float]:
+    """rpy of a surface whose x axis climbs at ``alpha`` in the x-z plane, its normal turned
+    from up-back towards +y by ``inward`` [rad]."""
+    return (-inward, -alpha, 0.0)
 
 
 def ladder_inclined(robot: str, steps: int = 1) -> dict[str, Any]:
@@ -320,12 +333,15 @@ def ladder_inclined(robot: str, steps: int = 1) -> dict[str, Any]:
     bearing forces); the left foot goes on step 2 as a geometric contact whose ellipse radii
     are at least 40 % of the step's width (its depth, 12 cm)."""
     size = robot_size(robot)
-    alpha, rise, depth, width = math.radians(60.0), 0.2, 0.12, 0.5
-    x0 = 0.5 * size.sole_length + 0.2
+    alpha, rise, depth = math.radians(60.0), 0.2, 0.12
+    width = max(0.5, 2 * (size.shoulder_half_width + RAIL_CLEARANCE))
+    run = rise / math.tan(alpha)  # horizontal distance between steps
+    # x0: where step 0 would be; step 1's front edge is LADDER_GAP in front of the toes
+    x0 = 0.5 * size.sole_length + LADDER_GAP + 0.5 * depth - run
     n_steps = 2 * max(1, steps) + 2
     surfaces = [GROUND]
     for k in range(1, n_steps + 1):
-        s = rect(f"step{k}", [x0 + k * rise / math.tan(alpha), 0.0, k * rise], (depth, width))
+        s = rect(f"step{k}", [x0 + k * run, 0.0, k * rise], (depth, width))
         s["thickness"] = 0.03
         surfaces.append(s)
     rail_h = 0.55 * size.shoulder_height  # rail height above the steps' front line
@@ -334,24 +350,29 @@ def ladder_inclined(robot: str, steps: int = 1) -> dict[str, Any]:
         # the rail's centre line climbs from (x0, rail_h), above the ladder's foot
         xc = x0 + 0.5 * rail_len * math.cos(alpha)
         zc = rail_h + 0.5 * rail_len * math.sin(alpha)
-        s = rect(f"{side}_rail", [xc, y, zc], (rail_len, 0.05), _rail_rpy(alpha))
+        tilt = RAIL_TILT if side == "right" else -RAIL_TILT
+        s = rect(f"{side}_rail", [xc, y, zc], (rail_len, 0.05), _rail_rpy(alpha, tilt))
         s["thickness"] = 0.04
         surfaces.append(s)
-    geo = {"type": "geometric", "min_radii": [0.4 * depth, 0.4 * depth]}
+    # every foothold is as solid as the paper asks of the last one; the hand rests on the
+    # rail with an ellipse at least 3 cm across (the rail is 5 cm wide)
+    foothold = {"min_radii": [0.4 * depth, 0.4 * depth]}
+    geo = {"type": "geometric", **foothold}
+    grip = {"type": "support", "min_radii": [0.015, 0.015]}
     stages: list[dict[str, Any]] = [
         {"name": "stand", "contacts": _feet_on_ground(half_width=size.stance_half_width)},
         {
             "name": "right foot on step 1",
             "contacts": [
                 *_keep("left_sole"),
-                {"robot_patch": "right_sole", "surface": "step1", "type": "support"},
+                {"robot_patch": "right_sole", "surface": "step1", "type": "support", **foothold},
             ],
         },
         {
             "name": "right hand on the right rail",
             "contacts": [
                 *_keep("left_sole", "right_sole"),
-                {"robot_patch": "right_hand", "surface": "right_rail", "type": "support"},
+                {"robot_patch": "right_hand", "surface": "right_rail", **grip},
             ],
         },
         {
@@ -379,6 +400,8 @@ def ladder_inclined(robot: str, steps: int = 1) -> dict[str, Any]:
 
 RUNG_SPACING = 0.25  # [m]
 RUNG_THICKNESS = 0.025  # [m]
+HAND_MU = 1.0  # a hand closed around a rung holds better than a sole on a plank
+STILE_CLEARANCE = 0.1  # [m] from the shoulders to the stiles
 
 
 def _foot_on_rung(patch: str, k: int, geometric: bool) -> dict[str, Any]:
@@ -399,18 +422,21 @@ def ladder_vertical(robot: str, steps: int = 0) -> dict[str, Any]:
     hands moving up one rung after each foot."""
     size = robot_size(robot)
     xl = 0.5 * size.sole_length + 0.2
-    hand_rung = max(3, round(size.shoulder_height / RUNG_SPACING))
+    # hands on the highest rung at least 10 cm below the shoulders (chest height)
+    hand_rung = max(3, math.floor((size.shoulder_height - 0.1) / RUNG_SPACING))
     n_rungs = hand_rung + 2 * max(0, steps) + 2
+    # the stiles clear the shoulders by STILE_CLEARANCE (at least 45 cm between them)
+    half_width = max(0.225, size.shoulder_half_width + STILE_CLEARANCE)
     surfaces = [GROUND]
     for k in range(1, n_rungs + 1):
-        s = rect(f"rung{k}", [xl, 0.0, k * RUNG_SPACING], (RUNG_THICKNESS, 0.45))
+        s = rect(f"rung{k}", [xl, 0.0, k * RUNG_SPACING], (RUNG_THICKNESS, 2 * half_width))
         s["thickness"] = RUNG_THICKNESS
         surfaces.append(s)
     obstacles = [
         box(f"{side}_stile", [xl, y, 1.6], [0.03, 0.04, 3.2])
-        for side, y in (("left", 0.26), ("right", -0.26))
+        for side, y in (("left", half_width + 0.02), ("right", -half_width - 0.02))
     ]
-    hand = {"type": "support", "min_radii": [0.3 * RUNG_THICKNESS, 0.03]}
+    hand = {"type": "support", "min_radii": [0.3 * RUNG_THICKNESS, 0.03], "mu": HAND_MU}
     stages: list[dict[str, Any]] = [
         {"name": "stand", "contacts": _feet_on_ground(half_width=size.stance_half_width)},
         {

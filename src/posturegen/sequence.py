@@ -50,6 +50,7 @@ class StageReport:
     posture_file: str
     result: Result
     wall_time_s: float
+    diagnosis: str = ""  # for a failed stage: which relaxation would let it solve
 
     def to_dict(self) -> dict[str, Any]:
         """The stage's entry of ``sequence.json``."""
@@ -60,6 +61,7 @@ class StageReport:
             "posture": self.posture_file,
             "success": r.success,
             "message": r.message,
+            "diagnosis": self.diagnosis,
             "iterations": r.iterations,
             "solve_time_s": r.solve_time_s,
             "build_time_s": r.build_time_s,
@@ -122,6 +124,7 @@ def _kept(
     else:  # pragma: no cover - every contact type is one of the two
         raise InputError(f"{fld}.type", f"cannot keep contact '{name}'", "fix it explicitly")
     out = {k: v for k, v in c.items() if k in ("name", "mu", "friction")}
+    out.setdefault("mu", float(old.mu))  # a kept contact keeps its friction coefficient
     out.update(
         {
             "robot_patch": old.patch.name,
@@ -175,11 +178,13 @@ def run_sequence(
     out_dir: str | Path,
     progress: Callable[[int, int, str, StageReport | None], None] | None = None,
     stop_on_failure: bool = True,
+    diagnose: bool = True,
 ) -> SequenceReport:
     """Solve every stage in order, writing problems, postures and ``sequence.json``.
 
     ``progress(k, n, stage_name, report)`` is called before (report None) and after each
-    stage. A failed stage ends the sequence (its posture file is still written)."""
+    stage. A failed stage ends the sequence (its posture file is still written); with
+    ``diagnose`` its report says which relaxation would let it solve (:func:`diagnose_failure`)."""
     seq = F.require_mapping(seq, "sequence")
     F.check_keys(
         seq,
@@ -209,7 +214,8 @@ def run_sequence(
         posture = dict(result.posture)
         posture["stage"] = {"index": k, "name": name, "sequence": report.name}
         (out / f"{stem}.json").write_text(json.dumps(posture, indent=1))
-        rep = StageReport(name, f"{stem}.yaml", f"{stem}.json", result, wall)
+        diagnosis = "" if result.success or not diagnose else diagnose_failure(data)
+        rep = StageReport(name, f"{stem}.yaml", f"{stem}.json", result, wall, diagnosis)
         report.stages.append(rep)
         if progress:
             progress(k, len(stages), name, rep)
@@ -218,6 +224,50 @@ def run_sequence(
             break
         previous, q_prev = problem, result.q
     return report
+
+
+RELAXED_TORQUE_SCALE = 10.0
+
+
+def diagnose_failure(data: dict[str, Any]) -> str:
+    """Why a stage's problem dict found no posture, by solving relaxed copies of it: with the
+    torque limits ×10, without collision avoidance, then without both. One line."""
+    options = data.get("options", {}) or {}
+    avoids = bool(options.get("self_collision")) or options.get("environment_collision", True)
+
+    def attempt(torque: bool, collision: bool) -> Result:
+        relaxed = copy.deepcopy(data)
+        opts = relaxed.setdefault("options", {})
+        if torque:
+            opts["torque_limit_scale"] = RELAXED_TORQUE_SCALE * opts.get("torque_limit_scale", 1)
+        if collision:
+            opts["self_collision"], opts["environment_collision"] = False, False
+        return solve(problem_from_dict(relaxed))
+
+    torque = attempt(True, False)
+    if torque.success:
+        problem = problem_from_dict(data)
+        ratio = np.abs(torque.torques) / problem.robot.model.effortLimit[6:]
+        j = int(np.argmax(ratio))
+        return (
+            "the robot cannot do it within its torque limits: with them ×"
+            f"{RELAXED_TORQUE_SCALE:g} it can, needing {ratio[j]:.2f}× the limit of "
+            f"{problem.robot.joint_names[j]}"
+        )
+    if not avoids:
+        return "no posture even with the torque limits ×10: the contacts are out of reach"
+    free = attempt(False, True)
+    if free.success:
+        return (
+            "only by colliding: without collision avoidance it solves, so the scene's "
+            "obstacles or the robot's own body (its proxies) leave no room"
+        )
+    if attempt(True, True).success:
+        return "only by colliding and beyond its torque limits (it solves without both)"
+    return (
+        "no posture even with the torque limits ×10 and without collision avoidance: "
+        "the contacts are out of reach"
+    )
 
 
 def _write_index(seq: dict[str, Any], report: SequenceReport, out: Path) -> None:
