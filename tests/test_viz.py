@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from posturegen import problem_from_dict, solve, viz
+from posturegen import viz
 from posturegen.cli import main
 from posturegen.errors import InputError
 
@@ -33,59 +33,24 @@ CHROMIUM_FLAGS = [
 ]
 
 
-def _step_posture() -> dict:
-    """Talos, left foot fixed on the ground, right foot on a 12 cm step as a support contact:
-    an ellipse and forces on its boundary."""
-    problem = problem_from_dict(
-        {
-            "robot": "talos",
-            "surfaces": [
-                {"name": "ground", "vertices": [[-1, -1], [1, -1], [1, 1], [-1, 1]]},
-                {
-                    "name": "step",
-                    "position": [0.3, -0.1, 0.1],
-                    "rpy": [0, 0, 0.1],
-                    "vertices": [[-0.06, -0.3], [0.06, -0.3], [0.06, 0.3], [-0.06, 0.3]],
-                },
-            ],
-            "contacts": [
-                {
-                    "robot_patch": "left_sole",
-                    "surface": "ground",
-                    "type": "fixed",
-                    "position": [0.0, 0.1],
-                },
-                {
-                    "robot_patch": "right_sole",
-                    "surface": "step",
-                    "type": "support",
-                    "points": 8,
-                    "maximize_area": 1.0,
-                },
-            ],
-        }
-    )
-    result = solve(problem)
-    assert result.success, result.message
-    return result.posture
-
-
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
-    """Two posture files (the stand-reach demo through the CLI with --png, and the step) and
-    a sequence file of both."""
+    """Two posture files drawn by the CLI's --png: the stand-reach demo (a problem file) and
+    the wall-brace scene on Talos (a sequence: its left hand is a support contact on the wall,
+    with an ellipse and forces on its boundary); and a sequence file of both."""
     d = tmp_path_factory.mktemp("viz")
     assert main(["demo", "stand-reach", "--out", str(d / "demo"), "--png", "--quiet"]) == 0
-    step = d / "step.json"
-    step.write_text(json.dumps(_step_posture()))
+    brace = d / "brace"
+    args = ["demo", "wall-brace", "--robot", "talos", "--out", str(brace), "--png", "--quiet"]
+    assert main(args) == 0
     seq = viz.write_sequence(
         d / "sequence.json",
         [
             {"name": "stand and reach", "posture": d / "demo" / "posture.json"},
-            {"name": "right foot on the step", "posture": step},
+            {"name": "left hand on the wall", "posture": brace / "posture.json"},
         ],
     )
-    return {"dir": d, "demo": d / "demo" / "posture.json", "step": step, "sequence": seq}
+    return {"dir": d, "demo": d / "demo" / "posture.json", "brace": brace, "sequence": seq}
 
 
 def _distinct(rgb: np.ndarray) -> int:
@@ -108,7 +73,7 @@ def _colour_counts(img: Image.Image) -> dict[str, int]:
 def test_png_has_the_papers_colours_and_size(files, tmp_path):
     # the meshes are loaded by now (the fixture's demo --png): this times the drawing
     t0 = time.perf_counter()
-    out = viz.render_png(files["step"], tmp_path / "step.png")
+    out = viz.render_png(files["brace"] / "posture.json", tmp_path / "brace.png")
     elapsed = time.perf_counter() - t0
     assert elapsed < 5.0, f"render took {elapsed:.1f} s"
     img = Image.open(out)
@@ -122,16 +87,22 @@ def test_png_has_the_papers_colours_and_size(files, tmp_path):
 def test_demo_png_option_and_render_command(files, tmp_path, capsys):
     png = files["demo"].with_suffix(".png")  # demo --png: next to the posture
     assert png.is_file() and Image.open(png).size == (1600, 900)
+    # a scene's demo: every stage's figure beside its posture, the last one as posture.png
+    stages = json.loads((files["brace"] / "sequence.json").read_text())["stages"]
+    for stage in stages:
+        assert (files["brace"] / stage["posture"]).with_suffix(".png").is_file()
+    assert (files["brace"] / "posture.png").is_file()
     out = tmp_path / "collision.png"
-    code = main(["render", str(files["demo"]), "-o", str(out), "--meshes", "collision"])
-    assert code == 0 and out.is_file()
+    args = ["--meshes", "collision", "--azimuth", "90", "--elevation", "30"]
+    assert main(["render", str(files["demo"]), "-o", str(out), *args]) == 0
+    assert out.is_file()
     assert main(["render", str(tmp_path / "missing.json")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no such file" in err[0]
 
 
 def test_render_accepts_a_posture_dict(files, tmp_path):
-    posture = json.loads(files["step"].read_text())
+    posture = json.loads((files["brace"] / "posture.json").read_text())
     assert viz.render_png(posture, tmp_path / "p.png").is_file()
     with pytest.raises(InputError, match="schema"):
         viz.render_png({"q": []}, tmp_path / "bad.png")
@@ -139,10 +110,10 @@ def test_render_accepts_a_posture_dict(files, tmp_path):
 
 def test_sequence_file_round_trip(files, tmp_path):
     stages = viz.load_sequence(files["sequence"])
-    assert [name for name, _, _ in stages] == ["stand and reach", "right foot on the step"]
+    assert [name for name, _, _ in stages] == ["stand and reach", "left hand on the wall"]
     data = json.loads(files["sequence"].read_text())
     assert data["schema"] == viz.SEQUENCE_SCHEMA
-    assert data["stages"][1]["posture"] == "step.json"  # relative to the sequence file
+    assert data["stages"][1]["posture"] == "brace/posture.json"  # relative to the sequence
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"schema": viz.SEQUENCE_SCHEMA, "stages": [{"name": "x"}]}))
     assert main(["view", str(bad), "-o", str(tmp_path / "bad.html")]) == 2
@@ -161,6 +132,42 @@ def test_decimation_keeps_the_shape():
     assert np.allclose(W.min(axis=0)[:2], 0, atol=0.06)
     assert np.allclose(W.max(axis=0)[:2], 1, atol=0.06)
     assert S.max() < len(W)
+
+
+def test_zbuffer_keeps_the_nearest_triangle():
+    # two 10 x 10 pixel right triangles over one square, the second nearer; a third one
+    # nearer still but outside the image
+    P = np.array(
+        [
+            [[0, 0], [10, 0], [0, 10]],
+            [[0, 0], [10, 0], [0, 10]],
+            [[20, 20], [30, 20], [20, 30]],
+        ],
+        dtype=float,
+    )
+    Z = np.array([[1.0, 1.0, 1.0], [2.0, 0.0, 0.0], [-5.0, -5.0, -5.0]])
+    zbuf, ids = viz.rasterize(P, Z, 12, 12)
+    assert (ids >= 0).sum() in range(45, 56)  # half of the 10 x 10 square
+    assert ids[0, 8] == 1 and ids[8, 0] == 1  # the second one is nearer at the far corners
+    assert ids[0, 0] == 0  # ... but not at the first corner (depth 2 > 1)
+    assert np.isinf(zbuf[11, 11]) and ids[11, 11] == -1
+    assert np.isclose(zbuf[0, 0], 1.0)
+
+
+def test_camera_keeps_the_contacts_in_view(files):
+    # the brace posture: the wall's side of the robot faces the chosen camera, and every
+    # contact and force point is inside the figure's window
+    posture = viz.load_posture_any(files["brace"] / "posture.json")
+    sv = viz.stance_view(posture)
+    robot = sv.world_triangles()
+    content = viz._content(sv, robot, viz._force_scale([sv]))
+    cam = viz._choose_camera(sv, robot, viz._scene_mesh(sv)[0], content, viz.VIEW_ELEVATION)
+    wall = next(c for c in sv.contacts if c.surface == "wall")
+    assert wall.T_ws[:3, 2] @ -cam.forward > 0
+    frame = viz.Frame.fit(cam.screen(content), 800, 700)
+    for c in sv.contacts:
+        px = frame.pixels(cam.screen(np.vstack([c.patch3d, c.points3d])))
+        assert (px >= 0).all() and (px[:, 0] < 800).all() and (px[:, 1] < 700).all()
 
 
 def test_html_is_one_offline_file(files, tmp_path):
@@ -236,5 +243,5 @@ def test_viewer_draws_in_headless_chromium(browser, files, tmp_path):
     a = np.asarray(first.convert("RGB"))
     assert _distinct(a) > 50  # not blank: shaded meshes
     assert (a.std(axis=(0, 1)) > 5).all()
-    assert "2/2" in label and "right foot on the step" in label
+    assert "2/2" in label and "left hand on the wall" in label
     assert not np.array_equal(a, np.asarray(second.convert("RGB")))

@@ -147,11 +147,17 @@ def _run_sequence(seq: dict, out: Path, quiet: bool, png: str | None, final: boo
     last = report.stages[-1]
     if final:
         shutil.copyfile(out / last.posture_file, out / "posture.json")
-    if png is not None:
+    if png is not None:  # every stage's figure beside its posture, the last one also at FILE
         from .viz import render_png
 
         for st in report.stages:
-            render_png(out / st.posture_file, (out / st.posture_file).with_suffix(".png"))
+            figure = render_png(out / st.posture_file, (out / st.posture_file).with_suffix(".png"))
+        target = Path(png) if png else (out / "posture.png" if final else None)
+        if target is not None:
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(figure, target)
+        if not quiet:
+            print(f"wrote {len(report.stages)} figures" + (f", {target}" if target else ""))
     if not quiet:
         print(f"wrote {out / 'sequence.json'} ({len(report.stages)} stages)")
     if report.success:
@@ -163,6 +169,8 @@ def _run_sequence(seq: dict, out: Path, quiet: bool, png: str | None, final: boo
         f"'{last.name}' ({last.result.message}); nothing after it was solved",
         file=sys.stderr,
     )
+    if last.diagnosis:
+        print(f"posturegen: diagnosis: {last.diagnosis}", file=sys.stderr)
     return EXIT_NOT_FOUND
 
 
@@ -171,7 +179,15 @@ def cmd_render(args: argparse.Namespace) -> int:
     from .viz import render_png
 
     out = Path(args.out) if args.out else Path(args.posture).with_suffix(".png")
-    path = render_png(args.posture, out, meshes=args.meshes, dpi=args.dpi, title=args.title)
+    path = render_png(
+        args.posture,
+        out,
+        meshes=args.meshes,
+        dpi=args.dpi,
+        title=args.title,
+        azimuth=args.azimuth,
+        elevation=args.elevation,
+    )
     print(f"wrote {path}")
     return EXIT_OK
 
@@ -192,7 +208,8 @@ def _add_png_option(p: argparse.ArgumentParser) -> None:
         nargs="?",
         const="",
         metavar="FILE",
-        help="also draw the posture to FILE (default: DIR/posture.png)",
+        help="also draw the posture to FILE (default: DIR/posture.png; a climb draws every "
+        "stage beside its posture file)",
     )
 
 
@@ -267,6 +284,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--meshes", **meshes)
     p.add_argument("--dpi", type=float, default=100.0, help="100: 1600x900 pixels")
     p.add_argument("--title", help="the figure's title (default: robot, file and status)")
+    p.add_argument(
+        "--azimuth",
+        type=float,
+        help="camera azimuth from the robot's heading [deg] (default: chosen to show the "
+        "robot and its contacts, -35 (front right) when nothing hides them)",
+    )
+    p.add_argument(
+        "--elevation", type=float, default=18.0, help="camera elevation [deg] (default 18)"
+    )
     p.set_defaults(func=cmd_render)
     p = sub.add_parser("view", help="write a posture or sequence file's 3-D viewer (one HTML)")
     p.add_argument("source", help="a posture file, or a sequence file (a climb's stances)")

@@ -4,7 +4,9 @@
   meshes, the scene's surfaces and obstacles, each contact's polygons (robot patch green,
   surface red), its ellipse (blue) and its forces (red arrows); beside it a close-up of each
   contact in its surface's plane (both polygons, their intersection, the ellipse, the force
-  points). Matplotlib with the Agg canvas only: no display needed.
+  points). The 3-D view is an orthographic z-buffer of the meshes (:func:`rasterize`, NumPy),
+  its camera chosen so that the scene hides little of the robot and its contacts; the contacts
+  are drawn over it. Matplotlib with the Agg canvas only: no display needed.
 - :func:`write_html` writes ONE HTML file with an interactive three.js view (orbit, zoom, pan;
   toggles for polygons, ellipses, forces and the scene; a slider through the stances of a
   sequence). three.js is inlined from the vendored npm package in ``data/js`` (see
@@ -47,9 +49,10 @@ from .verify import SCHEMA, SEQUENCE_SCHEMA, load_posture
 from .verify import read_json as read_json_file
 
 MESH_KINDS = ("visual", "collision")
-VIEW_AZIMUTH = -35.0  # the camera, from the robot's heading [deg] (front, robot's right side)
+VIEW_AZIMUTHS = (-35.0, -60.0, -15.0, -90.0, 35.0, 60.0, 15.0, 90.0)  # the camera's candidate
+# azimuths from the robot's heading [deg], preferred first (-35: front, robot's right side)
 VIEW_ELEVATION = 18.0  # [deg]
-PNG_CELL = 0.012  # decimation cell of the figure's meshes [m]
+PNG_CELL = 0.006  # decimation cell of the figure's meshes [m] (the z-buffer makes it cheap)
 HTML_CELL = 0.006  # decimation cell of the viewer's meshes [m]
 SLAB = 0.02  # thickness of a surface's solid when the posture file does not give it [m]
 
@@ -58,9 +61,10 @@ PATCH_COLOR = "#1a9a3a"  # robot patch: green
 SURFACE_COLOR = "#d62728"  # surface polygon: red
 ELLIPSE_COLOR = "#1f3fd0"  # contact ellipse: blue
 FORCE_COLOR = "#e00000"  # contact forces: red arrows
-SCENE_RGB = (0.86, 0.80, 0.68)  # support surfaces
-CONTACT_SURFACE_RGB = (0.92, 0.74, 0.66)  # support surfaces in contact (tinted red)
+SCENE_RGB = (0.87, 0.84, 0.77)  # support surfaces
+CONTACT_SURFACE_RGB = (0.97, 0.84, 0.81)  # support surfaces in contact (tinted red)
 OBSTACLE_RGB = (0.62, 0.70, 0.80)
+OBSTACLE_EDGE_COLOR = "#3b5b85"
 
 
 # --------------------------------------------------------------------------- input
@@ -158,6 +162,9 @@ def decimate(
     T2 = T2[np.sort(first)]
     used, T3 = np.unique(T2, return_inverse=True)
     return W[used], T3.reshape(-1, 3)
+
+
+_BOX_EDGES = [(i, i ^ bit) for i in range(8) for bit in (1, 2, 4) if i < i ^ bit]  # of _box_mesh
 
 
 def _box_mesh(half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -502,8 +509,9 @@ def _contact_view(c: dict[str, Any], model: pin.Model, data: pin.Data, where: st
     return view
 
 
-# --------------------------------------------------------------------------- figure (PNG)
+# --------------------------------------------------------------------------- camera, z-buffer
 def _view_direction(azim: float, elev: float) -> np.ndarray:
+    """The unit vector from the scene towards a camera at azimuth and elevation [deg]."""
     a, e = np.radians(azim), np.radians(elev)
     return np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
 
@@ -513,6 +521,139 @@ def _base_yaw(posture: dict[str, Any]) -> float:
     return math.degrees(math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
 
 
+@dataclass(frozen=True)
+class Camera:
+    """An orthographic camera: the screen's axes ``right`` and ``up`` and the viewing
+    direction ``forward`` (from the camera into the scene), unit world vectors."""
+
+    right: np.ndarray
+    up: np.ndarray
+    forward: np.ndarray
+
+    @classmethod
+    def orbit(cls, azim: float, elev: float) -> Camera:
+        """The camera at azimuth ``azim`` (world, deg) and elevation ``elev`` (deg, |elev| <
+        90), z up on the screen."""
+        forward = -_view_direction(azim, float(np.clip(elev, -89.0, 89.0)))
+        right = np.cross(forward, [0.0, 0.0, 1.0])
+        right /= np.linalg.norm(right)
+        return cls(right, np.cross(right, forward), forward)
+
+    def screen(self, pts: np.ndarray) -> np.ndarray:
+        """World points (..., 3) -> screen coordinates (..., 2) [m]."""
+        pts = np.asarray(pts, dtype=float)
+        return np.stack([pts @ self.right, pts @ self.up], axis=-1)
+
+    def depth(self, pts: np.ndarray) -> np.ndarray:
+        """World points (..., 3) -> depth (...) [m], larger is farther."""
+        return np.asarray(pts, dtype=float) @ self.forward
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A screen window: ``width`` x ``height`` pixels of ``res`` metres, its top-left corner
+    at screen (``x0``, ``y1``)."""
+
+    x0: float
+    y1: float
+    res: float
+    width: int
+    height: int
+
+    @classmethod
+    def fit(cls, xy: np.ndarray, width: int, height: int, margin: float = 0.04) -> Frame:
+        """The window of ``width`` x ``height`` pixels that shows the screen points ``xy``
+        (k, 2) centred, with ``margin`` (a fraction of the window) on every side."""
+        lo, hi = xy.min(axis=0), xy.max(axis=0)
+        span = np.maximum(hi - lo, 1e-3)
+        res = float(max(span[0] / width, span[1] / height)) / (1 - 2 * margin)
+        c = (lo + hi) / 2
+        return cls(c[0] - res * width / 2, c[1] + res * height / 2, res, width, height)
+
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """(left, right, bottom, top) in screen metres (matplotlib's ``imshow`` extent)."""
+        return (
+            self.x0,
+            self.x0 + self.res * self.width,
+            self.y1 - self.res * self.height,
+            self.y1,
+        )
+
+    def scaled(self, k: int) -> Frame:
+        """The same window with ``k`` times as many pixels on each side."""
+        return Frame(self.x0, self.y1, self.res / k, self.width * k, self.height * k)
+
+    def pixels(self, xy: np.ndarray) -> np.ndarray:
+        """Screen points (..., 2) [m] -> pixel coordinates (..., 2) (x right, y down)."""
+        xy = np.asarray(xy, dtype=float)
+        return np.stack([(xy[..., 0] - self.x0) / self.res, (self.y1 - xy[..., 1]) / self.res], -1)
+
+
+def _expand(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For ``counts`` (m,): the owner of each of the ``sum(counts)`` items and its rank."""
+    owner = np.repeat(np.arange(len(counts)), counts)
+    starts = np.cumsum(counts) - counts
+    return owner, np.arange(len(owner)) - starts[owner]
+
+
+def rasterize(
+    P: np.ndarray, Z: np.ndarray, width: int, height: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Z-buffer of triangles: ``P`` (n, 3, 2) pixel coordinates (x right, y down; pixel (i, j)
+    is the unit square at (i, j), sampled at its centre), ``Z`` (n, 3) depths (smaller is
+    nearer). Returns the depth image (height, width) (inf where empty) and the index of the
+    triangle seen at each pixel (-1 where none). Vectorized over row spans: the work is
+    proportional to the rows and pixels the triangles cover."""
+    P = np.asarray(P, dtype=float).reshape(-1, 3, 2)
+    Z = np.asarray(Z, dtype=float).reshape(-1, 3)
+    zbuf = np.full(width * height, np.inf, dtype=np.float32)
+    ids = np.full(width * height, -1, dtype=np.int32)
+    a, b, c = P[:, 0], P[:, 1], P[:, 2]
+    area = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    y0 = np.maximum(np.ceil(P[:, :, 1].min(axis=1) - 0.5), 0)
+    y1 = np.minimum(np.floor(P[:, :, 1].max(axis=1) - 0.5), height - 1)
+    x_lo, x_hi = P[:, :, 0].min(axis=1), P[:, :, 0].max(axis=1)
+    keep = np.flatnonzero((np.abs(area) > 1e-9) & (y1 >= y0) & (x_hi >= 0) & (x_lo <= width))
+    if len(keep) == 0:
+        return zbuf.reshape(height, width), ids.reshape(height, width)
+    a, b, c, area, Zk = a[keep], b[keep], c[keep], area[keep], Z[keep]
+    # inward half-planes of the edges, A x + B y + C >= 0, (k, 3)
+    s = np.sign(area)[:, None]
+    p, q = np.stack([a, b, c], 1), np.stack([b, c, a], 1)
+    dx, dy = q[..., 0] - p[..., 0], q[..., 1] - p[..., 1]
+    A, B, C = -s * dy, s * dx, s * (dy * p[..., 0] - dx * p[..., 1])
+    # the depth plane z = al x + be y + ga
+    dzb, dzc = Zk[:, 1] - Zk[:, 0], Zk[:, 2] - Zk[:, 0]
+    al = (dzb * (c[:, 1] - a[:, 1]) - dzc * (b[:, 1] - a[:, 1])) / area
+    be = (dzc * (b[:, 0] - a[:, 0]) - dzb * (c[:, 0] - a[:, 0])) / area
+    ga = Zk[:, 0] - al * a[:, 0] - be * a[:, 1]
+    # one span per (triangle, row): the pixel centres x with every A x >= -(B y + C)
+    tri, k = _expand((y1[keep] - y0[keep] + 1).astype(np.int64))
+    row = y0[keep].astype(np.int64)[tri] + k
+    yc = row + 0.5
+    rhs = -(B[tri] * yc[:, None] + C[tri])
+    At = A[tri]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bound = rhs / At
+    x_l = np.where(At > 0, bound, -np.inf).max(axis=1)
+    x_r = np.where(At < 0, bound, np.inf).min(axis=1)
+    empty = ((At == 0) & (rhs > 0)).any(axis=1)
+    c0 = np.maximum(np.ceil(x_l - 0.5), 0)
+    c1 = np.minimum(np.floor(x_r - 0.5), width - 1)
+    count = np.where(empty, 0, np.maximum(c1 - c0 + 1, 0)).astype(np.int64)
+    span, j = _expand(count)
+    x = c0[span].astype(np.int64) + j
+    t = tri[span]
+    z = (al[t] * (x + 0.5) + be[t] * yc[span] + ga[t]).astype(np.float32)
+    pix = row[span] * width + x
+    np.minimum.at(zbuf, pix, z)
+    seen = z <= zbuf[pix]
+    ids[pix[seen]] = keep[t[seen]]
+    return zbuf.reshape(height, width), ids.reshape(height, width)
+
+
+# --------------------------------------------------------------------------- scene geometry
 def _clip_polygon(poly2d: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray | None:
     """A convex polygon clipped to the rectangle [lo, hi] (shapely), None when empty."""
     from shapely.geometry import Polygon, box
@@ -521,24 +662,6 @@ def _clip_polygon(poly2d: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndar
     if inter.is_empty or inter.geom_type != "Polygon" or inter.area <= 0:
         return None
     return np.asarray(inter.exterior.coords)[:-1]
-
-
-def _tiles(poly2d: np.ndarray, step: float) -> list[np.ndarray]:
-    """Triangles (k, 3, 2) covering a convex polygon, cut on a grid of ``step`` so that the
-    painter's algorithm sorts them sensibly among the robot's triangles."""
-    from shapely.geometry import Polygon, box
-
-    P = Polygon(poly2d)
-    x0, y0, x1, y1 = P.bounds
-    out = []
-    for x in np.arange(x0, x1, step):
-        for y in np.arange(y0, y1, step):
-            cell = P.intersection(box(x, y, min(x + step, x1), min(y + step, y1)))
-            if cell.is_empty or cell.geom_type != "Polygon" or cell.area <= 1e-12:
-                continue
-            v = np.asarray(cell.exterior.coords)[:-1]
-            out += [np.array([v[0], v[i], v[i + 1]]) for i in range(1, len(v) - 1)]
-    return out
 
 
 def _local_rect(T: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -566,73 +689,56 @@ def _surface_edges(
     return edges
 
 
-def _quad_tiles(a: np.ndarray, b: np.ndarray, d: np.ndarray, step: float) -> list[np.ndarray]:
-    """Triangles (3, 3) covering the parallelogram a, b, b + d - a, d, cut in cells of about
-    ``step`` so that the painter's algorithm sorts them sensibly."""
-    nu = max(1, math.ceil(float(np.linalg.norm(b - a)) / step))
-    nv = max(1, math.ceil(float(np.linalg.norm(d - a)) / step))
-    out = []
-    for i in range(nu):
-        for j in range(nv):
-            p = [
-                a + (b - a) * u / nu + (d - a) * v / nv
-                for u, v in ((i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1))
-            ]
-            out += [np.array(p[:3]), np.array([p[0], p[2], p[3]])]
-    return out
+BIG_SURFACE = 1.5  # [m]: a surface this wide (ground, wall) is drawn as a plane, a smaller
+# one (step, rung, rail) as the solid under it, ``thickness`` deep
 
 
-def _scene_triangles(
-    sv: StanceView, lo: np.ndarray, hi: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """World triangles (k, 3, 3) and base colours (k, 3) of the surfaces (clipped to the box
-    [lo, hi]; a small one with the sides of its solid) and the obstacles."""
+def _scene_mesh(
+    sv: StanceView, window: tuple[np.ndarray, np.ndarray] | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World triangles of the scene: the surfaces (k, 3, 3) with their colours (k, 3) (in
+    contact tinted red; a big surface clipped to the world box ``window`` when given, a small
+    one with the sides of its solid, darker), and the obstacles' boxes (m, 3, 3)."""
     tris, cols = [], []
     in_contact = {c.surface for c in sv.contacts}
     for name, T, verts, thickness in sv.surfaces:
-        clipped = _clip_polygon(verts, *_local_rect(T, lo, hi))
-        if clipped is None:
+        rgb = np.array(CONTACT_SURFACE_RGB if name in in_contact else SCENE_RGB)
+        small = float(np.ptp(verts, axis=0).max()) < BIG_SURFACE
+        poly = verts if small or window is None else _clip_polygon(verts, *_local_rect(T, *window))
+        if poly is None:
             continue
-        extent = float(np.ptp(clipped, axis=0).max())
-        rgb = CONTACT_SURFACE_RGB if name in in_contact else SCENE_RGB
-        for t in _tiles(clipped, max(extent / 10, 0.05)):
-            tris.append(_apply(T, _lift(t)))
-            cols.append(rgb)
-        if float(np.ptp(verts, axis=0).max()) < 1.5:  # a step or a rung: its sides
-            top = _lift(verts)
+        top = _lift(poly)
+        fan = _fan(len(top))
+        tris.append(_apply(T, top[fan]))
+        cols += [rgb] * len(fan)
+        if small:
             bottom = top - [0, 0, thickness]
-            for i in range(len(verts)):
-                j = (i + 1) % len(verts)
-                side = _quad_tiles(top[i], top[j], bottom[i], 0.1)
-                tris += [_apply(T, t) for t in side]
-                cols += [np.multiply(rgb, 0.85)] * len(side)
-    faces = ((0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3))
+            tris.append(_apply(T, bottom[fan[:, ::-1]]))
+            cols += [rgb] * len(fan)
+            for i in range(len(top)):
+                j = (i + 1) % len(top)
+                quad = np.array([top[i], top[j], bottom[j], bottom[i]])
+                tris.append(_apply(T, quad[[[0, 2, 1], [0, 3, 2]]]))
+                cols += [0.8 * rgb] * 2
+    boxes = []
     for _, size, T in sv.obstacles:
-        V = _box_mesh(size / 2)[0]
-        for face in faces:
-            a, b, _, d = (V[i] for i in face)
-            pieces = _quad_tiles(a, b, d, max(float(size.max()) / 4, 0.05))
-            tris += [_apply(T, t) for t in pieces]
-            cols += [OBSTACLE_RGB] * len(pieces)
-    if not tris:
-        return np.zeros((0, 3, 3)), np.zeros((0, 3))
-    return np.array(tris), np.array(cols, dtype=float)
+        V, F = _box_mesh(size / 2)
+        boxes.append(_apply(T, V)[F])
+    return (
+        np.concatenate(tris) if tris else np.zeros((0, 3, 3)),
+        np.array(cols, dtype=float).reshape(-1, 3),
+        np.concatenate(boxes) if boxes else np.zeros((0, 3, 3)),
+    )
 
 
-def _bounds(sv: StanceView, robot_tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The box the 3-D view shows: robot, contacts, forces, targets, near obstacles."""
-    pts = [robot_tris.reshape(-1, 3)]
-    for c in sv.contacts:
-        pts.append(c.patch3d)
-        if c.ellipse3d is not None:
-            pts.append(c.ellipse_points(8))
-        if len(c.points3d):
-            pts.append(c.points3d)
-        # small surfaces (steps, rungs) entirely
-        if np.ptp(c.surface2d, axis=0).max() < 1.5:
-            pts.append(_apply(c.T_ws, _lift(c.surface2d)))
-    pts += [t for _, t in sv.targets]
-    allp = np.vstack([np.reshape(p, (-1, 3)) for p in pts])
+def _fan(n: int) -> np.ndarray:
+    """Triangles (n - 2, 3) of a fan over a convex polygon of n vertices."""
+    return np.array([[0, i, i + 1] for i in range(1, n - 1)])
+
+
+def _bounds(sv: StanceView, robot: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """The world box the viewer frames: :func:`_content` and the obstacles near it."""
+    allp = _content(sv, robot, scale)
     lo, hi = allp.min(axis=0), allp.max(axis=0)
     centre = (lo + hi) / 2
     for _, size, T in sv.obstacles:
@@ -658,89 +764,280 @@ def _force_scale(views: Sequence[StanceView]) -> float:
     return min(0.25 / fmax if fmax > 0 else 0.0, 1.0 / max(weight, 1e-9))
 
 
-def _draw_3d(ax: Any, sv: StanceView, scale: float) -> None:
-    """The robot, the scene and the contacts on a 3-D axes (orthographic)."""
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+# --------------------------------------------------------------------------- figure (PNG)
+SUPERSAMPLE = 2  # pixels per figure pixel on each side (antialiasing)
+OUTLINE_DEPTH = 0.025  # [m]: a depth step drawn as an outline
 
-    robot = sv.world_triangles()
-    lo, hi = _bounds(sv, robot)
-    margin = 0.05 * float((hi - lo).max()) + 0.05
-    lo, hi = lo - margin, hi + margin
-    lo[2] = min(lo[2], robot.reshape(-1, 3)[:, 2].min() - 0.02)
-    azim, elev = _base_yaw(sv.posture) + VIEW_AZIMUTH, VIEW_ELEVATION
-    light = _view_direction(azim + 40.0, elev + 35.0)
 
-    scene, scene_rgb = _scene_triangles(
-        sv, lo - 0.25 * (hi - lo).max(), hi + 0.25 * (hi - lo).max()
-    )
-    tris = np.concatenate([robot, scene])
-    base = (
-        np.vstack([np.tile(ROBOT_RGB, (len(robot), 1)), scene_rgb])
-        if len(scene)
-        else np.tile(ROBOT_RGB, (len(robot), 1))
-    )
+def _shade(
+    tris: np.ndarray, base: np.ndarray, cam: Camera, flat: float | np.ndarray = 0.0
+) -> np.ndarray:
+    """Flat-shaded colours (k, 3) of world triangles: a key light above-left of the camera,
+    a head light, ambient; two-sided. ``flat`` in [0, 1] fades the lights towards the base
+    colour (the scene's planes: light, so that the robot stands out)."""
     n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-15)
-    shade = 0.45 + 0.55 * np.abs(n @ light)
-    colors = np.clip(base * shade[:, None], 0, 1)
-    coll = Poly3DCollection(tris, facecolors=colors, edgecolors=colors, linewidths=0.25)
-    coll.set_zorder(1)
-    ax.add_collection3d(coll)
+    n *= np.where(n @ cam.forward > 0, -1.0, 1.0)[:, None]  # towards the camera
+    key = -cam.forward + 0.9 * cam.up - 0.6 * cam.right
+    key /= np.linalg.norm(key)
+    light = 0.30 + 0.55 * np.clip(n @ key, 0, 1) + 0.22 * np.clip(-(n @ cam.forward), 0, 1)
+    return np.clip(base * ((1 - np.asarray(flat)) * light + flat)[:, None], 0, 1)
 
-    overlay = 1e-3  # lift the contact drawings off their surface [m]
-    clip_lo, clip_hi = lo - 0.25 * (hi - lo).max(), hi + 0.25 * (hi - lo).max()
-    drawn = set()
-    for c in sv.contacts:  # the edges of small surfaces (steps, rungs), drawn on top
-        if c.surface in drawn or float(np.ptp(c.surface2d, axis=0).max()) >= 1.5:
-            continue
-        drawn.add(c.surface)
-        for seg in _surface_edges(c.T_ws, c.surface2d, clip_lo, clip_hi):
-            ax.plot(*(seg + overlay * c.T_ws[:3, 2]).T, color=SURFACE_COLOR, lw=1.6, zorder=5)
+
+def _content(sv: StanceView, robot: np.ndarray, scale: float) -> np.ndarray:
+    """World points (k, 3) the view must show: the robot, every contact (polygons, ellipse,
+    force arrows), the surfaces of the contacts that are not big, the targets."""
+    pts = [robot.reshape(-1, 3)]
     for c in sv.contacts:
-        normal = c.T_ws[:3, 2]
-        P = c.patch3d + 2 * overlay * normal
-        ax.add_collection3d(_poly3d(P, PATCH_COLOR, 0.25, 1.6, 6))
+        pts.append(c.patch3d)
+        if c.ellipse3d is not None:
+            pts.append(c.ellipse_points(16))
+        if len(c.points3d):
+            pts += [c.points3d, c.points3d + scale * c.forces3d]
+        if float(np.ptp(c.surface2d, axis=0).max()) < BIG_SURFACE:
+            pts.append(_apply(c.T_ws, _lift(c.surface2d)))
+    pts += [t[None] for _, t in sv.targets]
+    return np.vstack(pts)
+
+
+def _around_contacts(sv: StanceView, reach: float = 0.1, n: int = 7) -> np.ndarray:
+    """World points (k, 3) on each contact's surface around its robot patch (``reach`` [m]
+    beyond it), lifted 2 mm off the surface: what a view of the contact should not hide."""
+    from shapely.geometry import Point, Polygon
+
+    out = []
+    for c in sv.contacts:
+        lo, hi = c.patch2d.min(axis=0) - reach, c.patch2d.max(axis=0) + reach
+        surface = Polygon(c.surface2d)
+        grid = np.stack(np.meshgrid(np.linspace(lo[0], hi[0], n), np.linspace(lo[1], hi[1], n)))
+        pts = [p for p in grid.reshape(2, -1).T if surface.covers(Point(p))]
+        if pts:
+            out.append(_apply(c.T_ws, _lift(np.array(pts)) + [0, 0, 0.002]))
+    return np.vstack(out) if out else np.zeros((0, 3))
+
+
+def _choose_camera(
+    sv: StanceView, robot: np.ndarray, scene: np.ndarray, content: np.ndarray, elevation: float
+) -> Camera:
+    """The first of :data:`VIEW_AZIMUTHS` whose score is (nearly) the best one's. The score,
+    from low-resolution z-buffers: the part of the robot the scene leaves visible, plus the
+    part of the contacts' surfaces around the contacts that the rest of the scene leaves
+    visible, plus half the part of the contacts whose surface faces the camera."""
+    heading = _base_yaw(sv.posture)
+    normals = np.array([c.T_ws[:3, 2] for c in sv.contacts]).reshape(-1, 3)
+    around = _around_contacts(sv)
+    robot = robot[:: max(1, len(robot) // 15000)]  # a sample is enough for a fraction
+    tris = np.concatenate([robot, scene])
+    nr, size = len(robot), 128
+    top = 1.0 + (1.0 if len(around) else 0.0) + (0.5 if len(normals) else 0.0)  # best possible
+    scores = []
+    for azim in VIEW_AZIMUTHS:
+        cam = Camera.orbit(heading + azim, elevation)
+        frame = Frame.fit(cam.screen(content), size, size)
+        P, Z = frame.pixels(cam.screen(tris)), cam.depth(tris)
+        alone = (rasterize(P[:nr], Z[:nr], size, size)[1] >= 0).sum()
+        ids = rasterize(P, Z, size, size)[1]
+        robot_seen = ((ids >= 0) & (ids < nr)).sum() / max(alone, 1)
+        score = float(robot_seen)
+        if len(around):
+            zbuf = rasterize(P[nr:], Z[nr:], size, size)[0]
+            score += float(np.mean(_visible(cam, frame, zbuf, around)))
+        if len(normals):
+            score += 0.5 * float(np.mean(normals @ -cam.forward > 0.05))
+        scores.append(score)
+        if score >= top - 0.05:  # no later candidate can beat it by more
+            break
+    best = max(scores)
+    azim = next(a for a, s in zip(VIEW_AZIMUTHS, scores, strict=False) if s >= best - 0.05)
+    return Camera.orbit(heading + azim, elevation)
+
+
+def _image(
+    cam: Camera,
+    frame: Frame,
+    robot: np.ndarray,
+    scene: tuple[np.ndarray, np.ndarray, np.ndarray],
+) -> tuple[np.ndarray, np.ndarray, Frame]:
+    """The shaded view of the robot and the scene (:func:`_scene_mesh`) as RGB floats
+    (frame.height, frame.width, 3), the depth image of the supersampled frame, and that
+    frame."""
+    big = frame.scaled(SUPERSAMPLE)
+    surfaces, surface_rgb, boxes = scene
+    tris = np.concatenate([robot, surfaces])
+    base = np.vstack([np.tile(ROBOT_RGB, (len(robot), 1)), surface_rgb])
+    flat = np.r_[np.zeros(len(robot)), np.full(len(surfaces), 0.6)]
+    colours = np.vstack([_shade(tris, base, cam, flat), np.ones((1, 3))])  # last: background
+    zbuf, ids = rasterize(big.pixels(cam.screen(tris)), cam.depth(tris), big.width, big.height)
+    img = colours[ids]  # -1: the background
+    # outlines: depth steps, and the robot's edge against the scene, on the nearer side
+    kind = np.where(ids < 0, 0, np.where(ids < len(robot), 1, 2))
+    edge = np.zeros(ids.shape, dtype=bool)
+    for axis in (0, 1):
+        z, k, e = (np.moveaxis(a, axis, 0) for a in (zbuf, kind, edge))
+        with np.errstate(invalid="ignore"):
+            step = (np.abs(z[1:] - z[:-1]) > OUTLINE_DEPTH) | (k[1:] != k[:-1])
+        near = z[1:] < z[:-1]
+        e[1:] |= step & near
+        e[:-1] |= step & ~near
+    img[edge & (ids >= 0)] *= 0.45
+    if len(boxes):  # obstacles: translucent, over what they hide
+        bz, bids = rasterize(big.pixels(cam.screen(boxes)), cam.depth(boxes), big.width, big.height)
+        front = (bids >= 0) & (bz < zbuf)
+        shade = _shade(boxes, np.tile(OBSTACLE_RGB, (len(boxes), 1)), cam)
+        img[front] = 0.35 * img[front] + 0.65 * shade[bids[front]]
+    k = SUPERSAMPLE
+    return img.reshape(frame.height, k, frame.width, k, 3).mean(axis=(1, 3)), zbuf, big
+
+
+def _visible(cam: Camera, frame: Frame, zbuf: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Whether world points (k, 3) are in front of the z-buffer of ``frame`` (or outside it),
+    within 1 cm and 3 pixels."""
+    px = np.floor(frame.pixels(cam.screen(pts))).astype(np.int64)
+    inside = (px[:, 0] >= 0) & (px[:, 0] < frame.width) & (px[:, 1] >= 0)
+    inside &= px[:, 1] < frame.height
+    z = np.full(len(pts), np.inf)
+    z[inside] = zbuf[px[inside, 1], px[inside, 0]]
+    return cam.depth(pts) <= z + 0.01 + 3 * frame.res
+
+
+def _draw_edges(
+    ax: Any, cam: Camera, big: Frame, zbuf: np.ndarray, seg: np.ndarray, color: str
+) -> None:
+    """An edge (2, 3): solid where seen, dotted where hidden."""
+    n = max(2, int(np.linalg.norm(np.diff(cam.screen(seg), axis=0)) / big.res / 2))
+    pts = seg[0] + np.linspace(0, 1, n)[:, None] * (seg[1] - seg[0])
+    xy = cam.screen(pts)
+    seen = _visible(cam, big, zbuf, pts)
+    for flag in (True, False):
+        y = xy.copy()
+        y[seen != flag] = np.nan  # runs of one kind
+        if np.isfinite(y).any():
+            style = {"lw": 1.6, "ls": "-"} if flag else {"lw": 0.9, "ls": (0, (2, 2))}
+            ax.plot(y[:, 0], y[:, 1], color=color, zorder=4, **style)
+
+
+@dataclass(frozen=True)
+class View3D:
+    """What the figure's 3-D view draws: the robot's world triangles, the points it must show,
+    the scene (:func:`_scene_mesh`, big surfaces clipped to ``box``) and the camera."""
+
+    sv: StanceView
+    scale: float  # force arrows [m/N]
+    robot: np.ndarray
+    content: np.ndarray
+    box: tuple[np.ndarray, np.ndarray]
+    scene: tuple[np.ndarray, np.ndarray, np.ndarray]
+    cam: Camera
+
+    @classmethod
+    def of(
+        cls,
+        sv: StanceView,
+        scale: float,
+        azimuth: float | None = None,
+        elevation: float = VIEW_ELEVATION,
+    ) -> View3D:
+        """The view of a stance (see :func:`render_png` for the camera)."""
+        robot = sv.world_triangles()
+        content = _content(sv, robot, scale)
+        lo, hi = content.min(axis=0), content.max(axis=0)
+        margin = 0.35 + 0.1 * float((hi - lo).max())
+        box = (lo - margin, hi + margin)  # where big surfaces (ground, walls) are drawn
+        scene = _scene_mesh(sv, box)
+        if azimuth is None:
+            cam = _choose_camera(sv, robot, scene[0], content, elevation)
+        else:
+            cam = Camera.orbit(_base_yaw(sv.posture) + azimuth, elevation)
+        return cls(sv, scale, robot, content, box, scene, cam)
+
+    @property
+    def aspect(self) -> float:
+        """Width / height of the content on the screen."""
+        span = np.ptp(self.cam.screen(self.content), axis=0)
+        return float(span[0] / max(span[1], 1e-9))
+
+
+def _draw_3d(ax: Any, view: View3D, width: int, height: int) -> None:
+    """The robot, the scene and the contacts, orthographic, on a 2-D axes of ``width`` x
+    ``height`` pixels: a z-buffered image of the meshes, the contacts drawn on top."""
+    from matplotlib.patches import FancyArrowPatch, Polygon
+
+    sv, scale, cam, box = view.sv, view.scale, view.cam, view.box
+    frame = Frame.fit(cam.screen(view.content), width, height, margin=0.03)
+    img, zbuf, big = _image(cam, frame, view.robot, view.scene)
+    ax.imshow(img, extent=frame.extent, interpolation="none", zorder=1)
+
+    drawn = set()
+    for c in sv.contacts:  # the contacts' surfaces' edges, hidden parts dotted
+        if c.surface not in drawn:
+            drawn.add(c.surface)
+            for seg in _surface_edges(c.T_ws, c.surface2d, *box):
+                _draw_edges(ax, cam, big, zbuf, seg, SURFACE_COLOR)
+    for _, size, T in sv.obstacles:  # the obstacles' edges
+        corners = _apply(T, _box_mesh(size / 2)[0])
+        for i, j in _BOX_EDGES:
+            _draw_edges(ax, cam, big, zbuf, corners[[i, j]], OBSTACLE_EDGE_COLOR)
+    for c in sv.contacts:  # on top of everything
+        ax.add_patch(
+            Polygon(
+                cam.screen(c.patch3d), closed=True, fc=PATCH_COLOR, alpha=0.35, ec="none", zorder=5
+            )
+        )
+        ax.add_patch(
+            Polygon(
+                cam.screen(c.patch3d), closed=True, fill=False, ec=PATCH_COLOR, lw=1.6, zorder=5
+            )
+        )
         E = c.ellipse_points()
         if E is not None:
-            ax.add_collection3d(_poly3d(E + 3 * overlay * normal, ELLIPSE_COLOR, 0.35, 1.8, 7))
-        if c.point3d is not None:
-            ax.scatter(*c.point3d, color=PATCH_COLOR, s=20, zorder=8, depthshade=False)
-        if len(c.forces3d) and scale > 0:
-            v = c.forces3d * scale
-            ax.quiver(
-                *c.points3d.T,
-                *v.T,
-                color=FORCE_COLOR,
-                linewidths=1.6,
-                arrow_length_ratio=0.25,
-                zorder=9,
-                normalize=False,
+            ax.add_patch(
+                Polygon(
+                    cam.screen(E),
+                    closed=True,
+                    fc=ELLIPSE_COLOR,
+                    alpha=0.4,
+                    ec=ELLIPSE_COLOR,
+                    lw=1.6,
+                    zorder=6,
+                )
             )
+        if c.point3d is not None:
+            ax.plot(*cam.screen(c.point3d), "o", color=PATCH_COLOR, ms=5, zorder=7)
+        if len(c.forces3d) and scale > 0:
+            a = cam.screen(c.points3d)
+            b = cam.screen(c.points3d + scale * c.forces3d)
+            for p, q in zip(a, b, strict=True):
+                ax.add_patch(
+                    FancyArrowPatch(
+                        p,
+                        q,
+                        arrowstyle="-|>",
+                        mutation_scale=9,
+                        color=FORCE_COLOR,
+                        lw=1.4,
+                        shrinkA=0,
+                        shrinkB=0,
+                        zorder=8,
+                    )
+                )
+            ax.plot(*a.T, "o", color=FORCE_COLOR, ms=2.5, zorder=8)
+        centre = cam.screen(c.patch3d.mean(axis=0))
+        ax.annotate(
+            c.name,
+            centre,
+            xytext=(10, -12),
+            textcoords="offset points",
+            fontsize=8,
+            color="#1b5e20",
+            zorder=9,
+            bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.7},
+        )
     for _, t in sv.targets:
-        ax.scatter(*t, marker="x", color="black", s=40, zorder=10, depthshade=False)
-
-    ax.computed_zorder = False
-    ax.set_proj_type("ortho")
-    ax.view_init(elev=elev, azim=azim)
-    ax.set_xlim(lo[0], hi[0])
-    ax.set_ylim(lo[1], hi[1])
-    ax.set_zlim(lo[2], hi[2])
-    ax.set_box_aspect(tuple(hi - lo), zoom=1.3)
+        ax.plot(*cam.screen(t), "x", color="black", ms=8, mew=2, zorder=9)
+    ax.set_xlim(frame.extent[0], frame.extent[1])
+    ax.set_ylim(frame.extent[2], frame.extent[3])
+    ax.set_aspect("equal")
     ax.set_axis_off()
-
-
-def _poly3d(pts: np.ndarray, color: str, alpha: float, lw: float, z: int) -> Any:
-    from matplotlib.colors import to_rgba
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
-
-    p = Poly3DCollection(
-        [pts],
-        facecolors=[to_rgba(color, alpha)],
-        edgecolors=[to_rgba(color, 1.0)],
-        linewidths=lw,
-    )
-    p.set_zorder(z)
-    return p
 
 
 def _view_rect(c: ContactView) -> tuple[np.ndarray, np.ndarray]:
@@ -765,6 +1062,11 @@ def _draw_closeup(ax: Any, c: ContactView, scale2d: float) -> None:
     from shapely.geometry import Polygon
 
     lo, hi = _view_rect(c)
+    box = ax.get_position()  # widen the window to the cell's shape: more of the surroundings
+    shape = box.width * ax.figure.bbox.width / (box.height * ax.figure.bbox.height)
+    centre, span = (lo + hi) / 2, hi - lo
+    span = np.maximum(span, [span[1] * shape, span[0] / shape])
+    lo, hi = centre - span / 2, centre + span / 2
     surf = _clip_polygon(c.surface2d, lo - 1.0, hi + 1.0)
     if surf is not None:
         ax.add_patch(MplPolygon(surf, closed=True, fc=SURFACE_COLOR, alpha=0.12, ec="none"))
@@ -817,15 +1119,21 @@ def _draw_closeup(ax: Any, c: ContactView, scale2d: float) -> None:
                 width=0.006,
                 zorder=6,
             )
-        for (x, y), f in zip(p2, fn, strict=True):
-            if f > max(0.02 * fn.max(), 0.5):  # [N]
+        centre = p2.mean(axis=0)
+        for p, f in zip(p2, fn, strict=True):
+            if f > max(0.05 * fn.max(), 0.5):  # [N]
+                u = p - centre  # the label outwards, away from the other points
+                u = u / n if (n := float(np.linalg.norm(u))) > 1e-9 else np.array([1.0, 1.0])
                 ax.annotate(
                     f"{f:.0f} N",
-                    (x, y),
+                    p,
                     textcoords="offset points",
-                    xytext=(4, 4),
-                    fontsize=7,
+                    xytext=tuple(9 * u),
+                    ha="left" if u[0] > 0.3 else ("right" if u[0] < -0.3 else "center"),
+                    va="bottom" if u[1] > 0.3 else ("top" if u[1] < -0.3 else "center"),
+                    fontsize=7.5,
                     color="#900000",
+                    zorder=7,
                 )
         info.append(f"Σfₙ {fn.sum():.0f} N")
     ax.set_xlim(lo[0], hi[0])
@@ -840,6 +1148,21 @@ def _draw_closeup(ax: Any, c: ContactView, scale2d: float) -> None:
     ax.set_ylabel("y [m]", fontsize=7)
 
 
+def _title(posture: dict[str, Any], file: str | None) -> str:
+    """Robot, what the posture is (its climb stage, else its file) and whether it was
+    verified."""
+    robot = posture["robot"].get("name", "robot")
+    stage = posture.get("stage")
+    if isinstance(stage, dict) and "name" in stage:
+        what = f"{stage.get('sequence', 'sequence')}, stage {int(stage.get('index', 0)) + 1}: "
+        what += str(stage["name"])
+    else:
+        what = file or "posture"
+    why = str(posture.get("message", "?"))
+    state = "verified" if posture.get("success") else f"NOT verified: {why[:80]}"
+    return f"{robot} — {what} — {state}"
+
+
 def render_png(
     posture: str | Path | dict[str, Any],
     out_path: str | Path,
@@ -847,9 +1170,15 @@ def render_png(
     meshes: str = "visual",
     dpi: float = 100.0,
     title: str | None = None,
+    azimuth: float | None = None,
+    elevation: float = VIEW_ELEVATION,
 ) -> Path:
     """Draw a posture (file path or dict) to a PNG: the 3-D view on the left, a close-up of
-    each contact in its own plane on the right. 1600 x 900 pixels at ``dpi`` 100."""
+    each contact in its own plane on the right. 1600 x 900 pixels at ``dpi`` 100.
+
+    The camera looks from ``azimuth`` degrees off the robot's heading (default: the first of
+    :data:`VIEW_AZIMUTHS` that hides little of the robot behind the scene), ``elevation``
+    degrees above the horizon."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
@@ -858,15 +1187,18 @@ def render_png(
     data = load_posture_any(posture)
     sv = stance_view(data, meshes, PNG_CELL)
     scale = _force_scale([sv])
+    view = View3D.of(sv, scale, azimuth, elevation)
     fig = Figure(figsize=(16, 9), dpi=dpi)
     FigureCanvasAgg(fig)
     n = len(sv.contacts)
     ncols = 0 if n == 0 else (1 if n <= 2 else 2)
     nrows = max(1, math.ceil(n / max(ncols, 1)))
+    # the 3-D view as wide as its content at the figure's height, within 40-62 % of the width
+    share = float(np.clip(view.aspect * 0.83 * 9 / 16, 0.4, 0.62))
     gs = fig.add_gridspec(
         nrows,
         1 + ncols,
-        width_ratios=[1.8 if ncols == 1 else 2.3] + [1.0] * ncols,
+        width_ratios=[share / (1 - share) * max(ncols, 1) * 1.15] + [1.0] * ncols,
         left=0.01,
         right=0.98,
         top=0.9,
@@ -874,17 +1206,15 @@ def render_png(
         wspace=0.28,
         hspace=0.45,
     )
-    ax3 = fig.add_subplot(gs[:, 0], projection="3d")
-    _draw_3d(ax3, sv, scale)
+    ax3 = fig.add_subplot(gs[:, 0])
+    box = ax3.get_position()
+    width, height = (round(box.width * fig.bbox.width), round(box.height * fig.bbox.height))
+    _draw_3d(ax3, view, width, height)
     for k, c in enumerate(sv.contacts):
         ax = fig.add_subplot(gs[k // ncols, 1 + k % ncols])
         _draw_closeup(ax, c, 0.5 * scale)
     if title is None:
-        src = Path(posture).name if isinstance(posture, str | Path) else "posture"
-        robot = data["robot"].get("name", "robot")
-        why = str(data.get("message", "?"))
-        state = "verified" if data.get("success") else f"NOT verified: {why[:80]}"
-        title = f"{robot} — {src} — {state}"
+        title = _title(data, Path(posture).name if isinstance(posture, str | Path) else None)
     fig.suptitle(title, fontsize=13)
     handles = [
         Patch(fc=PATCH_COLOR, alpha=0.5, ec=PATCH_COLOR, label="robot patch (P1)"),
@@ -900,6 +1230,10 @@ def render_png(
             else "contact force",
         ),
     ]
+    if sv.obstacles:
+        handles.append(
+            Patch(fc=OBSTACLE_RGB, alpha=0.6, ec=OBSTACLE_EDGE_COLOR, label="obstacle (box)")
+        )
     if sv.targets:
         handles.append(Line2D([], [], color="black", marker="x", ls="none", label="task target"))
     fig.legend(handles=handles, loc="lower left", ncol=len(handles), fontsize=9, frameon=False)
@@ -929,37 +1263,15 @@ def _rounded(a: np.ndarray, digits: int = 5) -> list[Any]:
 
 
 def _scene_blob(sv: StanceView) -> dict[str, Any]:
-    """The stance's surfaces (fans; a small one as a slab) and obstacles as world triangle
+    """The stance's surfaces (:func:`_scene_mesh`, unclipped) and obstacles as world triangle
     soups: base64 float32 positions, uint8 RGB per vertex for the surfaces."""
-    in_contact = {c.surface for c in sv.contacts}
-    tris, cols = [], []
-    for name, T, verts, thickness in sv.surfaces:
-        rgb = CONTACT_SURFACE_RGB if name in in_contact else SCENE_RGB
-        top = _lift(verts)
-        tris += [_apply(T, top[[0, i, i + 1]]) for i in range(1, len(top) - 1)]
-        cols += [rgb] * (len(top) - 2)
-        if float(np.ptp(verts, axis=0).max()) < 1.5:
-            bottom = top - [0, 0, thickness]
-            tris += [_apply(T, bottom[[0, i + 1, i]]) for i in range(1, len(top) - 1)]
-            cols += [rgb] * (len(top) - 2)
-            for i in range(len(top)):
-                j = (i + 1) % len(top)
-                quad = np.array([top[i], top[j], bottom[j], bottom[i]])
-                tris += [_apply(T, quad[[0, 2, 1]]), _apply(T, quad[[0, 3, 2]])]
-                cols += [np.multiply(rgb, 0.85)] * 2
+    surfaces, rgb, boxes = _scene_mesh(sv)
     out: dict[str, Any] = {}
-    if tris:
-        rgb8 = np.repeat(np.round(255 * np.array(cols, dtype=float)), 3, axis=0)
-        out["surfaces"] = {
-            "v": _b64(np.array(tris).astype("<f4")),
-            "c": _b64(rgb8.astype(np.uint8)),
-        }
-    boxes = []
-    for _, size, T in sv.obstacles:
-        V, F = _box_mesh(size / 2)
-        boxes.append(_apply(T, V)[F])
-    if boxes:
-        out["obstacles"] = {"v": _b64(np.concatenate(boxes).astype("<f4"))}
+    if len(surfaces):
+        rgb8 = np.repeat(np.round(255 * rgb), 3, axis=0).astype(np.uint8)
+        out["surfaces"] = {"v": _b64(surfaces.astype("<f4")), "c": _b64(rgb8)}
+    if len(boxes):
+        out["obstacles"] = {"v": _b64(boxes.astype("<f4"))}
     return out
 
 
@@ -1003,13 +1315,13 @@ def viewer_html(views: Sequence[StanceView], files: Sequence[str], title: str) -
         )
     scenes: list[dict[str, Any]] = []
     stages = []
+    scale = _force_scale(views)
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for sv, file in zip(views, files, strict=True):
         blob = _scene_blob(sv)
         if blob not in scenes:
             scenes.append(blob)
-        robot = sv.world_triangles()
-        b_lo, b_hi = _bounds(sv, robot)
+        b_lo, b_hi = _bounds(sv, sv.world_triangles(), scale)
         lo, hi = np.minimum(lo, b_lo), np.maximum(hi, b_hi)
         poses = np.array([T[:3, :] for T in sv.part_poses]).astype("<f4")
         stages.append(
@@ -1024,12 +1336,10 @@ def viewer_html(views: Sequence[StanceView], files: Sequence[str], title: str) -
                 "targets": [_rounded(t) for _, t in sv.targets],
             }
         )
-    scale = _force_scale(views)
     centre = (lo + hi) / 2
     radius = 0.5 * float(np.linalg.norm(hi - lo))
-    eye = centre + 1.05 * radius / math.sin(math.radians(15)) * _view_direction(
-        _base_yaw(views[0].posture) + VIEW_AZIMUTH, VIEW_ELEVATION
-    )
+    cam = View3D.of(views[0], scale).cam  # from where the first stance's figure looks
+    eye = centre - 0.9 * radius / math.sin(math.radians(15)) * cam.forward
     data = {
         "title": title,
         "colors": {
