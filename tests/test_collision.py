@@ -227,3 +227,21 @@ def test_a_failed_active_set_loop_restarts_from_the_collision_free_solution(monk
     assert result.success, result.message
     assert result.posture["ipopt_runs"] >= 3
     assert result.posture["checks"]["collision: self (meshes)"]["value"] == 0
+
+
+@pytest.mark.parametrize("name", sorted(ROBOTS))
+def test_the_reference_posture_keeps_every_candidate_pair_apart(name):
+    """Link pairs that the reference posture puts closer than REFERENCE_GAP (proxies) or in
+    contact (meshes) are excluded: the margin must be reachable near the reference."""
+    from posturegen.collision import REFERENCE_GAP, self_distances
+
+    robot = load_robot(ROBOTS[name])
+    pm = proxy_model(robot)
+    data = robot.model.createData()
+    pin.forwardKinematics(robot.model, data, robot.q_init)
+    d = self_distances(pm, pm.centers_world(robot.model, data), pm.self_pairs)
+    assert d.min() >= REFERENCE_GAP
+    srdf = {"srdf": str(robot.srdf)} if robot.srdf else {}
+    probe = {"robot": srdf, "collision": {"self": True, "exclude": pm.excluded_joint_pairs}}
+    checks = mesh_collision_checks(probe, robot.model, robot.collision_model(), robot.q_init)
+    assert checks[0].value == 0, checks[0].detail

@@ -48,6 +48,7 @@ SOLE_SPHERE_RADIUS = 0.03  # [m] largest proxy radius on a link carrying a sole 
 MAX_SPHERE_RADIUS = 0.10  # [m]
 MAX_SPHERES = 16
 CYLINDER_SIDES = 16
+REFERENCE_GAP = 0.01  # [m] link pairs this close at the reference posture are not avoided
 
 
 def cache_dir() -> Path:
@@ -267,7 +268,8 @@ def proxy_model(robot: Robot) -> ProxyModel:
             pass  # a read-only home: fit again next time
     model = robot.model
     disabled = _disabled_joint_pairs(robot)
-    # proxies overlapping at the reference posture cannot be separated: disable those pairs
+    # proxies closer than the default margin at the reference posture (the G1 wrist and its
+    # fingers) cannot keep the margin near it: disable those pairs
     data = model.createData()
     pin.forwardKinematics(model, data, robot.q_init)
     centers = np.array([data.oMi[s.joint_id].act(s.center) for s in spheres])
@@ -280,7 +282,7 @@ def proxy_model(robot: Robot) -> ProxyModel:
             key = (min(a, b), max(a, b))
             if a == b or model.parents[a] == b or model.parents[b] == a or key in disabled:
                 continue
-            if np.linalg.norm(centers[i] - centers[j]) - radii[i] - radii[j] < 0:
+            if np.linalg.norm(centers[i] - centers[j]) - radii[i] - radii[j] < REFERENCE_GAP:
                 overlapping.add(key)
             pairs.append((i, j))
     pairs = [
