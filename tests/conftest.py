@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pinocchio as pin
 import pytest
 
 from posturegen.robot import load_bundled
+
+# Solvers run CasADi's virtual machine in the tests (no background compilation of every reused
+# structure into ~/.cache); tests/test_codegen.py sets its modes explicitly.
+os.environ.setdefault("POSTUREGEN_CODEGEN", "off")
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_ROBOTS = ROOT.parent / "shared" / "robots"

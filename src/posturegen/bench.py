@@ -42,16 +42,27 @@ class FamilyReport:
     constraints: int  # median over the problems of the last IPOPT run's rows
     contact_rows: int  # constraint rows of the contacts' geometry (not friction)
     failures: tuple[str, ...]
+    # generated C (``jit``): libraries compiled during the family and their compile wall time
+    # (those found in the disk cache cost nothing); the solves that ran compiled code
+    c_builds: int = 0
+    c_build_s: float = 0.0
+    c_solves: int = 0
 
     def line(self) -> str:
         """One human-readable line."""
-        return (
+        out = (
             f"{self.family:<24} n={self.n:<4} success={100 * self.success_rate:5.1f}%  "
             f"solve median={self.median_solve_ms:6.1f} ms  min={self.min_solve_ms:6.1f}  "
             f"max={self.max_solve_ms:7.1f}  call median={self.median_call_ms:6.1f} ms  "
             f"iterations median={self.median_iterations:.0f}  "
             f"vars={self.variables} rows={self.constraints} contact rows={self.contact_rows}"
         )
+        if self.c_solves or self.c_builds:
+            out += (
+                f"  C: {self.c_solves}/{self.n} solves, {self.c_builds} built "
+                f"({self.c_build_s:.1f} s)"
+            )
+        return out
 
 
 def _stance(rng: np.random.Generator) -> tuple[list[float], list[float], float, float, float]:
@@ -311,20 +322,28 @@ FAMILIES: dict[str, tuple[str, Callable[[int, int], Iterator[Problem]]]] = {
 
 
 def run_family(name: str, n: int = 100, seed: int = 0, jit: bool = False) -> FamilyReport:
-    """Solve n seeded problems of a family and collect statistics."""
+    """Solve n seeded problems of a family and collect statistics. ``jit``: generated C
+    (posturegen.codegen, mode ``sync``: a structure's library is loaded from the disk cache or
+    compiled before its first solve); else CasADi's virtual machine (mode ``off``), so that
+    the numbers do not depend on when a background build ends."""
+    from . import codegen
+
     description, generator = FAMILIES[name]
     problems = list(generator(n + 1, seed))
-    if jit:
-        for problem in problems:
-            problem.solver_options = dataclasses.replace(problem.solver_options, jit=True)
+    for problem in problems:
+        problem.solver_options = dataclasses.replace(
+            problem.solver_options, codegen="sync" if jit else "off"
+        )
+    builds_before = len(codegen.BUILDS)
     solve(problems[0])  # warm-up: builds the solver for this structure
     compiled = problems[0].compile()
-    times, calls, iters, ok, failures, rows = [], [], [], 0, [], []
+    times, calls, iters, ok, failures, rows, c_solves = [], [], [], 0, [], [], 0
     for i, problem in enumerate(problems[1:]):
         t0 = time.perf_counter()
         result = solve(problem)
         calls.append(time.perf_counter() - t0)
         rows.append(problem.compile().n_g)  # the last run's structure (collision rows vary)
+        c_solves += problem.compile().library
         times.append(result.solve_time_s)
         iters.append(result.iterations)
         if result.success:
@@ -351,6 +370,9 @@ def run_family(name: str, n: int = 100, seed: int = 0, jit: bool = False) -> Fam
             if name.startswith("contact.") and not name.endswith(".friction")
         ),
         failures=tuple(failures),
+        c_builds=len(codegen.BUILDS) - builds_before,
+        c_build_s=sum(b.compile_s for b in codegen.BUILDS[builds_before:]),
+        c_solves=c_solves,
     )
 
 

@@ -10,7 +10,6 @@ so a second problem of the same shape (other targets, other contact poses) pays 
 from __future__ import annotations
 
 import collections
-import tempfile
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import Any
@@ -126,8 +125,12 @@ class SolverOptions:
     max_iter: int = 200
     max_cpu_time: float = 30.0
     print_level: int = 0
-    # Compile the program's functions to C with the system's C compiler (CasADi JIT): about
-    # 4 s once per structure and process, then about 35 % faster solves. Needs gcc or cc.
+    # Generated C for the program's functions (posturegen.codegen): "auto" compiles a structure
+    # in the background once it is reused and loads it from the disk cache in later sessions,
+    # "sync" compiles before the first solve, "off" keeps CasADi's virtual machine; None:
+    # $POSTUREGEN_CODEGEN, else "auto". Without a C compiler: "off".
+    codegen: str | None = None
+    # the same as codegen="sync" (compile before the first solve; kept for problem files)
     jit: bool = False
     # start from given primal and dual values (active-set re-solves of collision avoidance)
     warm_start: bool = False
@@ -152,15 +155,6 @@ class SolverOptions:
         }
         if self.mu_init is not None:
             opts["ipopt.mu_init"] = self.mu_init
-        if self.jit:
-            opts.update(
-                {
-                    "jit": True,
-                    "compiler": "shell",
-                    # keep CasADi's temporary C and object files out of the working directory
-                    "jit_options": {"flags": ["-O0"], "directory": tempfile.gettempdir()},
-                }
-            )
         if self.warm_start:
             opts.update(
                 {
@@ -175,10 +169,20 @@ class SolverOptions:
             )
         return opts
 
+    def codegen_mode(self) -> str:
+        """The effective generated-C mode (see :mod:`posturegen.codegen`)."""
+        from . import codegen
+
+        return codegen.resolve_mode("sync" if self.jit else self.codegen)
+
 
 @dataclass
 class CompiledNLP:
-    """A built solver with the layout of its x, p and g vectors."""
+    """A built solver with the layout of its x, p and g vectors.
+
+    ``solver`` runs CasADi's virtual machine until the structure's generated C is available
+    (``library``: then it runs the compiled library of ``library_key``, see
+    :mod:`posturegen.codegen`); :meth:`refresh` switches when the library appears."""
 
     key: tuple[Any, ...]
     solver: ca.Function
@@ -193,6 +197,25 @@ class CompiledNLP:
     lbg: np.ndarray
     ubg: np.ndarray
     build_time_s: float
+    ipopt_options: dict[str, Any] = field(default_factory=dict)
+    codegen_mode: str = "off"
+    library_key: str | None = None  # content hash of the program (None: codegen off)
+    library: bool = False  # solver runs the compiled library
+    uses: int = 0  # solves of this structure in this process
+
+    def refresh(self) -> None:
+        """Count a use of the solver; switch to the compiled library when it is in the cache;
+        in mode ``auto``, start its background build at the second use."""
+        self.uses += 1
+        if self.library or self.library_key is None:
+            return
+        from . import codegen
+
+        solver = codegen.load(self.library_key, self.ipopt_options)
+        if solver is not None:
+            self.solver, self.library = solver, True
+        elif self.codegen_mode == "auto" and self.uses >= codegen.AUTO_BUILD_AFTER_USES:
+            codegen.build_in_background(self.library_key, self.solver, self.nlp)
 
     @property
     def n_x(self) -> int:
@@ -214,7 +237,29 @@ def _layout(blocks: dict[str, Any], size: Any) -> dict[str, slice]:
     return out
 
 
+@dataclass
+class _Program:
+    """The symbolic program of one structure: min f(x, p) s.t. lbg <= g(x, p) <= ubg,
+    lbx <= x <= ubx, with the layout of x, p and g, shared by its solver-option variants."""
+
+    x: ca.SX
+    p: ca.SX
+    f: ca.SX
+    g: ca.SX
+    function: ca.Function  # (x, p) -> (f, g)
+    outputs: ca.Function  # (x, p) -> outputs and cost terms
+    x_index: dict[str, slice]
+    p_index: dict[str, slice]
+    g_index: dict[str, slice]
+    cost_names: list[str]
+    lbx: np.ndarray
+    ubx: np.ndarray
+    lbg: np.ndarray
+    ubg: np.ndarray
+
+
 _CACHE: collections.OrderedDict[tuple[Any, ...], CompiledNLP] = collections.OrderedDict()
+_PROGRAMS: collections.OrderedDict[tuple[Any, ...], _Program] = collections.OrderedDict()
 _CACHE_SIZE = 32
 
 
@@ -258,14 +303,63 @@ class Problem:
         return (id(self.robot.model), tuple(t.key() for t in self.terms()), self.solver_options)
 
     def compile(self) -> CompiledNLP:
-        """The compiled program for this structure (built once, then cached)."""
+        """The compiled program for this structure and these solver options (built once, then
+        cached; the symbolic program is shared by every solver-option variant)."""
         key = self.key()
         if key in _CACHE:
             _CACHE.move_to_end(key)
             return _CACHE[key]
         import time
 
+        from . import codegen
+
         t0 = time.perf_counter()
+        prog = self._program()
+        opts = self.solver_options.ipopt()
+        mode = self.solver_options.codegen_mode()
+        lib_key = codegen.library_key(prog.function) if mode != "off" else None
+        # the structure's library from the disk cache: no SX derivatives to build
+        solver = codegen.load(lib_key, opts) if lib_key is not None else None
+        library = solver is not None
+        if solver is None:
+            solver = ca.nlpsol(
+                "posture", "ipopt", {"x": prog.x, "p": prog.p, "f": prog.f, "g": prog.g}, opts
+            )
+            if mode == "sync" and lib_key is not None:
+                codegen.build(lib_key, solver, prog.function)
+                built = codegen.load(lib_key, opts)
+                if built is not None:
+                    solver, library = built, True
+        compiled = CompiledNLP(
+            key=key,
+            solver=solver,
+            nlp=prog.function,
+            outputs=prog.outputs,
+            x_index=prog.x_index,
+            p_index=prog.p_index,
+            g_index=prog.g_index,
+            cost_names=prog.cost_names,
+            lbx=prog.lbx,
+            ubx=prog.ubx,
+            lbg=prog.lbg,
+            ubg=prog.ubg,
+            build_time_s=time.perf_counter() - t0,
+            ipopt_options=opts,
+            codegen_mode=mode,
+            library_key=lib_key,
+            library=library,
+        )
+        _CACHE[key] = compiled
+        while len(_CACHE) > _CACHE_SIZE:
+            _CACHE.popitem(last=False)
+        return compiled
+
+    def _program(self) -> _Program:
+        """The symbolic program of this structure (declared once, then cached)."""
+        key = self.key()[:2]
+        if key in _PROGRAMS:
+            _PROGRAMS.move_to_end(key)
+            return _PROGRAMS[key]
         nlp = NLP()
         ctx = BuildContext(robot=self.robot, nlp=nlp, kin=self.robot.kinematics)
         for term in self.terms():
@@ -274,22 +368,20 @@ class Problem:
         p = ca.vertcat(*nlp.p.values()) if nlp.p else ca.SX(0, 1)
         g = ca.vertcat(*[v[0] for v in nlp.g.values()])
         cost = sum(nlp.costs.values()) if nlp.costs else ca.SX(0)
-        solver = ca.nlpsol(
-            "posture", "ipopt", {"x": x, "p": p, "f": cost, "g": g}, self.solver_options.ipopt()
-        )
         names = list(nlp.outputs)
-        outputs = ca.Function(
-            "outputs",
-            [x, p],
-            [nlp.outputs[n] for n in names] + [nlp.costs[n] for n in nlp.costs],
-            ["x", "p"],
-            names + [f"cost.{n}" for n in nlp.costs],
-        )
-        compiled = CompiledNLP(
-            key=key,
-            solver=solver,
-            nlp=ca.Function("nlp", [x, p], [cost, g], ["x", "p"], ["f", "g"]),
-            outputs=outputs,
+        prog = _Program(
+            x=x,
+            p=p,
+            f=cost,
+            g=g,
+            function=ca.Function("nlp", [x, p], [cost, g], ["x", "p"], ["f", "g"]),
+            outputs=ca.Function(
+                "outputs",
+                [x, p],
+                [nlp.outputs[n] for n in names] + [nlp.costs[n] for n in nlp.costs],
+                ["x", "p"],
+                names + [f"cost.{n}" for n in nlp.costs],
+            ),
             x_index=_layout(nlp.x, lambda v: v[0].shape[0]),
             p_index=_layout(nlp.p, lambda v: v.shape[0]),
             g_index=_layout(nlp.g, lambda v: v[0].shape[0]),
@@ -298,12 +390,11 @@ class Problem:
             ubx=np.concatenate([v[2] for v in nlp.x.values()]),
             lbg=np.concatenate([v[1] for v in nlp.g.values()]),
             ubg=np.concatenate([v[2] for v in nlp.g.values()]),
-            build_time_s=time.perf_counter() - t0,
         )
-        _CACHE[key] = compiled
-        while len(_CACHE) > _CACHE_SIZE:
-            _CACHE.popitem(last=False)
-        return compiled
+        _PROGRAMS[key] = prog
+        while len(_PROGRAMS) > _CACHE_SIZE:
+            _PROGRAMS.popitem(last=False)
+        return prog
 
     def numeric(
         self, compiled: CompiledNLP

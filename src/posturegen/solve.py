@@ -86,6 +86,7 @@ def _run_ipopt(
     """One IPOPT run; with ``lam_g0`` (multipliers per constraint block) a warm start."""
     built_before = problem.key() in _CACHE
     compiled = problem.compile()
+    compiled.refresh()  # generated C once it is built (posturegen.codegen)
     x_init, p, lbg, ubg = problem.numeric(compiled)
     if x0 is not None and x0.shape == x_init.shape:
         x_init = x0

@@ -1,0 +1,158 @@
+"""Generated C for the program's functions: keyed by the program's content, cached on disk,
+built in the background after reuse, identical to CasADi's virtual machine."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import os
+
+import numpy as np
+import pytest
+import yaml
+
+from posturegen import codegen, problem_from_dict, solve
+from posturegen.cli import _demo_dir
+from posturegen.problem import _CACHE
+
+STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
+needs_cc = pytest.mark.skipif(codegen.compiler() is None, reason="no C compiler")
+
+
+def _problem(mode: str, target: list[float] | None = None, torque_cost: bool = False):
+    """The stand-reach demo; ``torque_cost`` adds a cost term: another program."""
+    data = copy.deepcopy(STAND)
+    if target is not None:
+        data["tasks"][0]["target"] = target
+    if torque_cost:
+        data["costs"] = {"torques": 1e-3}
+    p = problem_from_dict(data)
+    p.solver_options = dataclasses.replace(p.solver_options, codegen=mode)
+    return p
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    """A fresh library cache for this module; the in-memory solver cache restored after."""
+    mp = pytest.MonkeyPatch()
+    path = tmp_path_factory.mktemp("cache")
+    mp.setenv("POSTUREGEN_CACHE", str(path))
+    saved = dict(_CACHE)
+    _CACHE.clear()
+    yield path
+    codegen.wait()
+    _CACHE.clear()
+    _CACHE.update(saved)
+    mp.undo()
+
+
+def test_library_key_follows_the_program_not_its_parameters():
+    a = _problem("off").compile()
+    b = _problem("off", target=[0.35, -0.45, 1.0]).compile()
+    c = _problem("off", torque_cost=True).compile()
+    assert a is b  # one structure
+    key = codegen.library_key(a.nlp)
+    assert key == codegen.library_key(b.nlp)
+    assert key != codegen.library_key(c.nlp)  # another program: another library
+
+
+def test_library_key_covers_the_compiler_flags(monkeypatch):
+    nlp = _problem("off").compile().nlp
+    key = codegen.library_key(nlp)
+    monkeypatch.setattr(codegen, "HOT_FLAGS", ("-O2",))
+    assert codegen.library_key(nlp) != key
+
+
+def test_modes():
+    assert codegen.resolve_mode("off") == "off"
+    with pytest.raises(ValueError, match="codegen mode"):
+        codegen.resolve_mode("fast")
+
+
+@needs_cc
+def test_auto_builds_after_reuse_and_matches_the_virtual_machine(cache):
+    reference = solve(_problem("off"))
+    first = _problem("auto")
+    r1 = solve(first)
+    compiled = first.compile()
+    assert not compiled.library and codegen.pending() == []  # one use: no build
+    assert not codegen.library_path(compiled.library_key).exists()
+    solve(_problem("auto", target=[0.35, -0.45, 1.0]))  # second use: queued in the background
+    assert compiled.library_key in codegen.pending() or compiled.library
+    assert codegen.wait(timeout=300)
+    assert codegen.library_path(compiled.library_key).is_file()
+    r3 = solve(_problem("auto"))
+    assert compiled.library  # switched to the compiled library
+    for r in (r1, r3):
+        assert r.success, r.message
+        assert r.iterations == reference.iterations
+        assert np.max(np.abs(r.q - reference.q)) <= 1e-9
+        scale = max(1.0, float(np.max(np.abs(reference.torques))))
+        assert np.max(np.abs(r.torques - reference.torques)) <= 1e-9 * scale
+    assert codegen.BUILDS[-1].background
+
+
+@needs_cc
+def test_second_build_loads_from_disk_without_compiling(cache, monkeypatch):
+    _problem("sync").compile()  # built by the previous test or now
+    _CACHE.clear()  # as in a new process
+
+    def no_compiler(*args, **kwargs):
+        raise AssertionError("compiled again")
+
+    monkeypatch.setattr(codegen, "_generate", no_compiler)
+    monkeypatch.setattr(codegen, "_compile", no_compiler)
+    p = _problem("sync", target=[0.35, -0.45, 1.0])
+    compiled = p.compile()
+    assert compiled.library
+    r = solve(p)
+    assert r.success, r.message
+    assert compiled.library
+
+
+@needs_cc
+def test_sync_builds_before_the_first_solve(cache, monkeypatch):
+    monkeypatch.setattr(codegen, "HOT_FLAGS", ("-O0",))  # another key, and a quick build
+    _CACHE.clear()
+    builds = len(codegen.BUILDS)
+    p = _problem("sync")
+    r = solve(p)
+    assert p.compile().library
+    assert r.success, r.message
+    assert len(codegen.BUILDS) == builds + 1 and not codegen.BUILDS[-1].background
+    assert codegen.BUILDS[-1].size == codegen.library_path(p.compile().library_key).stat().st_size
+
+
+def test_without_a_compiler_the_virtual_machine_solves(cache, monkeypatch):
+    monkeypatch.setattr(codegen, "compiler", lambda: None)
+    assert codegen.resolve_mode("sync") == "off"
+    _CACHE.clear()
+    p = _problem("sync", torque_cost=True)
+    compiled = p.compile()
+    assert compiled.library_key is None and not compiled.library
+    assert solve(p).success
+
+
+def test_a_failed_build_falls_back_to_the_virtual_machine(cache, monkeypatch):
+    monkeypatch.setenv("CC", "false")  # a "compiler" that always fails
+    monkeypatch.setattr(codegen, "_FAILED", set())
+    _CACHE.clear()
+    p = _problem("sync", torque_cost=True)
+    with pytest.warns(UserWarning, match="C build failed"):
+        compiled = p.compile()
+    assert not compiled.library and compiled.library_key in codegen._FAILED
+    assert not codegen.library_path(compiled.library_key).exists()
+    assert solve(p).success
+
+
+def test_prune_keeps_the_most_recently_used_libraries(tmp_path, monkeypatch):
+    monkeypatch.setenv("POSTUREGEN_CACHE", str(tmp_path))
+    root = codegen.cache_dir()
+    root.mkdir(parents=True)
+    for age, name in enumerate(["new", "mid", "old"]):  # 3 MB each, older and older
+        path = root / f"{name}.so"
+        path.write_bytes(b"\0" * (3 << 20))
+        os.utime(path, (1e9 - age * 100, 1e9 - age * 100))
+    monkeypatch.setattr(codegen, "MAX_CACHE_BYTES", 7 << 20)
+    codegen._prune()
+    assert sorted(p.stem for p in root.glob("*.so")) == ["mid", "new"]
