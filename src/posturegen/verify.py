@@ -221,6 +221,45 @@ def verify_posture(
 TOL_PENETRATION = 0.002  # a robot mesh may be at most this far inside a scene box [m]
 
 
+# filtered geometry models of the self-collision check, per (model, geometry, SRDF,
+# exclusions); the model and geometry objects are held so that their ids stay theirs
+_SELF_PAIRS: dict[tuple[Any, ...], tuple[pin.Model, pin.GeometryModel, pin.GeometryModel]] = {}
+
+
+def _self_pairs_model(
+    model: pin.Model,
+    geometry: pin.GeometryModel,
+    srdf: str | None,
+    excluded: frozenset[tuple[str, ...]],
+) -> pin.GeometryModel:
+    """``geometry`` with every collision pair to check: all pairs but the SRDF's disabled
+    ones, those of one joint or of a parent and child joint, and the excluded joint pairs
+    (built once per arguments: the SRDF parse and the pair loop took 11-15 ms per call)."""
+    key = (id(model), id(geometry), srdf, excluded)
+    hit = _SELF_PAIRS.get(key)
+    if hit is not None:
+        return hit[2]
+    gm = geometry.copy()
+    gm.addAllCollisionPairs()
+    if srdf:
+        pin.removeCollisionPairs(model, gm, srdf, False)
+    keep = []
+    for cp in gm.collisionPairs:
+        a = int(gm.geometryObjects[cp.first].parentJoint)
+        b = int(gm.geometryObjects[cp.second].parentJoint)
+        names = tuple(sorted((model.names[a], model.names[b])))
+        if a == b or model.parents[a] == b or model.parents[b] == a or names in excluded:
+            continue
+        keep.append(cp)
+    gm.removeAllCollisionPairs()
+    for cp in keep:
+        gm.addCollisionPair(cp)
+    if len(_SELF_PAIRS) >= 16:
+        _SELF_PAIRS.clear()
+    _SELF_PAIRS[key] = (model, geometry, gm)
+    return gm
+
+
 def mesh_collision_checks(
     posture: dict[str, Any], model: pin.Model, geometry: pin.GeometryModel, q: np.ndarray
 ) -> list[Check]:
@@ -234,23 +273,9 @@ def mesh_collision_checks(
     pin.updateGeometryPlacements(model, data, geometry, gdata)
     out = []
     if col.get("self"):
-        gm = geometry.copy()
-        gm.addAllCollisionPairs()
         srdf = posture["robot"].get("srdf")
-        if srdf:
-            pin.removeCollisionPairs(model, gm, str(srdf), False)
-        excluded = {tuple(sorted(p)) for p in col.get("exclude", [])}
-        keep = []
-        for cp in gm.collisionPairs:
-            a = int(gm.geometryObjects[cp.first].parentJoint)
-            b = int(gm.geometryObjects[cp.second].parentJoint)
-            names = tuple(sorted((model.names[a], model.names[b])))
-            if a == b or model.parents[a] == b or model.parents[b] == a or names in excluded:
-                continue
-            keep.append(cp)
-        gm.removeAllCollisionPairs()
-        for cp in keep:
-            gm.addCollisionPair(cp)
+        excluded = frozenset(tuple(sorted(p)) for p in col.get("exclude", []))
+        gm = _self_pairs_model(model, geometry, str(srdf) if srdf else None, excluded)
         gd = gm.createData()
         pin.updateGeometryPlacements(model, data, gm, gd)
         pin.computeCollisions(gm, gd, False)
