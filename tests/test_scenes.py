@@ -123,6 +123,59 @@ def test_paper_robots_are_found_or_named(monkeypatch: pytest.MonkeyPatch, tmp_pa
         scenes.robot_spec("asimo")
 
 
+def test_vertical_ladder_stages_follow_the_paper() -> None:
+    """Paper V-B, as built for HRP-2: both hands on the first rung at or above the shoulders
+    before the right foot leaves the ground, the right foot guided (a soft task) towards the
+    middle of rung 1, then the left foot on rung 2 as a geometric contact whose ellipse spans
+    the rung's thickness and most of the foot's width, the right foot and both hands kept."""
+    seq = scenes.ladder_vertical("hrp2")
+    size = scenes.robot_size("hrp2")
+    names = [s["name"] for s in seq["stages"]]
+    assert names == [
+        "stand",
+        "right hand on rung 5",
+        "left hand on rung 5",
+        "right foot on rung 1",
+        "left foot on rung 2",
+    ]
+    rungs = {s["name"]: s for s in seq["surfaces"] if s["name"].startswith("rung")}
+    assert rungs["rung5"]["position"][2] >= size.shoulder_height > rungs["rung4"]["position"][2]
+    foot = seq["stages"][3]
+    assert [c["type"] for c in foot["contacts"]] == ["keep", "keep", "keep", "support"]
+    (task,) = foot["tasks"]
+    assert task["weight"] > 0 and task["target"][1] == pytest.approx(0.0)
+    last = seq["stages"][-1]["contacts"]
+    assert [c["name"] for c in last[:3]] == ["right_sole", "right_hand", "left_hand"]
+    assert last[3]["type"] == "geometric" and last[3]["surface"] == "rung2"
+    thin, wide = last[3]["min_radii"]
+    assert 2 * thin >= 0.5 * scenes.RUNG_THICKNESS and 2 * wide >= 0.75 * size.sole_width
+    assert seq["friction"] == {"model": "pyramid", "faces": 8}
+    # a climb: the hands move up a rung each before each foot climbs two
+    climb = [s["name"] for s in scenes.ladder_vertical("hrp2", steps=1)["stages"]][5:]
+    assert climb == [
+        "right hand on rung 6",
+        "left hand on rung 6",
+        "right foot on rung 3",
+        "right hand on rung 7",
+        "left hand on rung 7",
+        "left foot on rung 4",
+    ]
+
+
+def test_inclined_ladder_lifts_the_left_foot_before_placing_it() -> None:
+    seq = scenes.ladder_inclined("talos")
+    names = [s["name"] for s in seq["stages"]]
+    assert names[-2:] == ["left foot lifted", "left foot on step 2"]
+    lifted = seq["stages"][-2]
+    assert [c["type"] for c in lifted["contacts"]] == ["keep", "keep"]
+    (task,) = lifted["tasks"]
+    step2, step3 = (next(s for s in seq["surfaces"] if s["name"] == n) for n in ("step2", "step3"))
+    # level with step 2, the toes behind step 3's front edge
+    toes = task["target"][0] + 0.5 * scenes.robot_size("talos").sole_length
+    assert toes < step3["position"][0] - 0.06
+    assert task["target"][2] == pytest.approx(step2["position"][2])
+
+
 # every shipped scene on its default robot and on Talos (issue 5's CI run); those listed in
 # VERIFIED must give a verified posture at every stage, the others must never write a false one
 SCENE_RUNS = sorted(
@@ -135,6 +188,8 @@ VERIFIED = {
     ("stairs", "talos"),
     ("stairs", "atlas"),
     ("ladder-inclined", "hrp2"),
+    ("ladder-inclined", "talos"),
+    ("ladder-vertical", "hrp2"),
 }
 
 

@@ -312,6 +312,24 @@ def stairs(robot: str, steps: int = 2) -> dict[str, Any]:
     }
 
 
+# Soft tasks (costs weight·|p - target|²/(0.1 m)², not constraints) that guide a foot on the
+# ladders: the first foot towards the middle of step or rung 1, and on the inclined ladder the
+# lifted left foot towards step 2.
+FOOTHOLD_WEIGHT = 1.0
+LIFT_WEIGHT = 0.3
+STEP_FOOT_Y = 0.05  # [m] the first foot's target on step 1, right of the middle
+# the lifted foot's target: level with step 2, its toes this far behind step 3's front edge
+# (measured: 2 to 6 cm solve on HRP-2 and Talos, 0 not on Talos; with the target 5 cm higher,
+# HRP-2 failed at 0, 3 and 5 cm: its toes went under step 2's front edge, between its foot's
+# proxies, and the mesh check rejected the posture)
+TOE_CLEARANCE = 0.04  # [m]
+
+
+def _foot_task(frame: str, target: list[float], weight: float) -> dict[str, Any]:
+    """A soft position task on a sole frame."""
+    return {"type": "position", "frame": frame, "target": target, "weight": weight}
+
+
 # the rails' hand face turns 75° from up-back towards the ladder's middle (measured: at 0° the
 # HRP-2 hand, whose patch is the back of the hand, cannot lie on it; 45° failed on HRP-2 and
 # 90° on Talos), and the rails clear the shoulders by 20 cm (10 cm let Talos' torso proxies
@@ -330,9 +348,10 @@ def _rail_rpy(alpha: float, inward: float) -> tuple[float, float, float]:
 def ladder_inclined(robot: str, steps: int = 1) -> dict[str, Any]:
     """Paper V-A: an inclined ladder (60°) with 12 cm steps every 20 cm and two guardrails.
     The right foot goes on step 1 and the right hand on the right guardrail (both then fixed,
-    bearing forces); the left foot goes on step 2 as a geometric contact whose ellipse radii
-    are at least 40 % of the step's width (its depth, 12 cm)."""
+    bearing forces); the left foot is lifted, then goes on step 2 as a geometric contact whose
+    ellipse radii are at least 40 % of the step's width (its depth, 12 cm)."""
     size = robot_size(robot)
+    frames = {p: load_robot(robot_spec(robot)).patch(p).frame for p in ("left_sole", "right_sole")}
     alpha, rise, depth = math.radians(60.0), 0.2, 0.12
     width = max(0.5, 2 * (size.shoulder_half_width + RAIL_CLEARANCE))
     run = rise / math.tan(alpha)  # horizontal distance between steps
@@ -367,12 +386,35 @@ def ladder_inclined(robot: str, steps: int = 1) -> dict[str, Any]:
                 *_keep("left_sole"),
                 {"robot_patch": "right_sole", "surface": "step1", "type": "support", **foothold},
             ],
+            # left alone, the foot lands 23 cm right of the middle, and Talos, whose wrists hold
+            # little, cannot then lift its left foot (it solves only beyond its torque limits,
+            # swinging its left arm and leg to the right as counterweights)
+            "tasks": [
+                _foot_task(frames["right_sole"], [x0 + run, -STEP_FOOT_Y, rise], FOOTHOLD_WEIGHT)
+            ],
         },
         {
             "name": "right hand on the right rail",
             "contacts": [
                 *_keep("left_sole", "right_sole"),
                 {"robot_patch": "right_hand", "surface": "right_rail", **grip},
+            ],
+        },
+        {
+            # the foot off the ground first: without this stage Talos' last stage fails (its
+            # left shin met step 3), its right foot guided or not
+            "name": "left foot lifted",
+            "contacts": _keep("right_sole", "right_hand"),
+            "tasks": [
+                _foot_task(
+                    frames["left_sole"],
+                    [
+                        x0 + 3 * run - 0.5 * depth - 0.5 * size.sole_length - TOE_CLEARANCE,
+                        size.stance_half_width,
+                        2 * rise,
+                    ],
+                    LIFT_WEIGHT,
+                )
             ],
         },
         {
@@ -398,32 +440,54 @@ def ladder_inclined(robot: str, steps: int = 1) -> dict[str, Any]:
     }
 
 
+# The vertical ladder, measured on HRP-2 (see ladder_vertical's notes): rungs every 25 cm,
+# 2.5 cm thick, 25 cm in front of the toes at the start.
 RUNG_SPACING = 0.25  # [m]
 RUNG_THICKNESS = 0.025  # [m]
+LADDER_STANDOFF = 0.25  # [m] from the toes at the start to the rungs' centre line
 HAND_MU = 1.0  # a hand closed around a rung holds better than a sole on a plank
 STILE_CLEARANCE = 0.1  # [m] from the shoulders to the stiles
+# On a vertical ladder the body hangs behind the rungs (its knees cannot pass them): the hands
+# pull it towards the ladder and the rung under the foot holds it back, both by friction along
+# x. The default 4-face pyramid has its faces normal to x and y, so it grants only μ/√2 along x
+# (where HRP-2's last stage failed, the foot and both hands were at that bound); 8 faces grant
+# 0.92 μ.
+LADDER_FRICTION: dict[str, Any] = {"model": "pyramid", "faces": 8}
+RUNG_FOOT_Y = 0.0  # [m] the first foot's target on rung 1, right of the middle
 
 
-def _foot_on_rung(patch: str, k: int, geometric: bool) -> dict[str, Any]:
+def _foot_on_rung(patch: str, k: int, geometric: bool, sole_width: float) -> dict[str, Any]:
     c: dict[str, Any] = {"robot_patch": patch, "surface": f"rung{k}"}
     if geometric:
-        # the ellipse spans the rung's thickness and a good part of the foot's width
-        c.update({"type": "geometric", "min_radii": [0.3 * RUNG_THICKNESS, 0.04]})
+        # paper V-B: the ellipse spans the foot's width (at least 80 % of it) and the rung's
+        # thickness (at least 60 % of it)
+        radii = [0.3 * RUNG_THICKNESS, 0.4 * sole_width]
+        c.update({"type": "geometric", "min_radii": radii})
     else:
         c.update({"type": "support", "min_radii": [0.3 * RUNG_THICKNESS, 0.03]})
     return c
 
 
 def ladder_vertical(robot: str, steps: int = 0) -> dict[str, Any]:
-    """Paper V-B: a vertical ladder with 2.5 cm thick rungs every 25 cm. The right foot stands
-    on rung 1 and both hands hold a rung at shoulder height (fixed); the left foot goes on
-    rung 2 as a geometric contact whose ellipse spans the foot's width and the rung's
-    thickness. With ``steps`` = K > 0 the climb goes on: each foot climbs K more rungs, the
-    hands moving up one rung after each foot."""
+    """Paper V-B: a vertical ladder with 2.5 cm thick rungs every 25 cm. Standing in front of
+    it, the robot puts both hands on the first rung at or above its shoulders, then its right
+    foot on rung 1; the left foot goes on rung 2 as a geometric contact whose ellipse spans the
+    foot's width and the rung's thickness, the right foot and both hands fixed. With
+    ``steps`` = K > 0 the climb goes on: each foot climbs K more rungs, two at a time, after
+    the hands moved up one rung each.
+
+    Measured on HRP-2, each change alone makes the last stage fail: the hands on rung 4 (below
+    the shoulders) instead of 5; the right foot first, the hands after it; rungs every 30 cm
+    (22 and 28 cm solve); the 4-face friction pyramid; no foothold task (the right foot then
+    lands 21 cm right of the middle, and the robot cannot stand on it alone); a 4 cm minimum
+    major radius instead of 80 % of the foot's width (which still solves with the standoff at
+    23, 27 or 30 cm). The demo solves with the standoff from 23 to 30 cm (not 20: the right
+    foot's stage fails) and the foothold task's weight from 0.5 to 2."""
     size = robot_size(robot)
-    xl = 0.5 * size.sole_length + 0.2
-    # hands on the highest rung at least 10 cm below the shoulders (chest height)
-    hand_rung = max(3, math.floor((size.shoulder_height - 0.1) / RUNG_SPACING))
+    sole_frame = load_robot(robot_spec(robot)).patch("right_sole").frame
+    xl = 0.5 * size.sole_length + LADDER_STANDOFF
+    # the hands on the first rung at or above the shoulders (HRP-2: rung 5, 1.25 m)
+    hand_rung = max(3, math.ceil(size.shoulder_height / RUNG_SPACING))
     n_rungs = hand_rung + 2 * max(0, steps) + 2
     # the stiles clear the shoulders by STILE_CLEARANCE (at least 45 cm between them)
     half_width = max(0.225, size.shoulder_half_width + STILE_CLEARANCE)
@@ -437,65 +501,55 @@ def ladder_vertical(robot: str, steps: int = 0) -> dict[str, Any]:
         for side, y in (("left", half_width + 0.02), ("right", -half_width - 0.02))
     ]
     hand = {"type": "support", "min_radii": [0.3 * RUNG_THICKNESS, 0.03], "mu": HAND_MU}
+
+    def hand_on(h: str, k: int, keep: tuple[str, ...]) -> dict[str, Any]:
+        return {
+            "name": f"{h.replace('_', ' ')} on rung {k}",
+            "contacts": [*_keep(*keep), {"robot_patch": h, "surface": f"rung{k}", **hand}],
+        }
+
+    def foot_on(foot: str, other: str, k: int) -> dict[str, Any]:
+        return {
+            "name": f"{foot.split('_')[0]} foot on rung {k}",
+            "contacts": [
+                *_keep(other, "right_hand", "left_hand"),
+                _foot_on_rung(foot, k, True, size.sole_width),
+            ],
+        }
+
+    # the right sole frame with its toes on rung 1's near half
+    foothold = [xl - 0.5 * size.sole_length - 0.01, -RUNG_FOOT_Y, RUNG_SPACING]
     stages: list[dict[str, Any]] = [
         {"name": "stand", "contacts": _feet_on_ground(half_width=size.stance_half_width)},
+        hand_on("right_hand", hand_rung, ("left_sole", "right_sole")),
+        hand_on("left_hand", hand_rung, ("left_sole", "right_sole", "right_hand")),
         {
             "name": "right foot on rung 1",
-            "contacts": [*_keep("left_sole"), _foot_on_rung("right_sole", 1, False)],
-        },
-        {
-            "name": f"right hand on rung {hand_rung}",
             "contacts": [
-                *_keep("left_sole", "right_sole"),
-                {"robot_patch": "right_hand", "surface": f"rung{hand_rung}", **hand},
+                *_keep("left_sole", "right_hand", "left_hand"),
+                _foot_on_rung("right_sole", 1, False, size.sole_width),
             ],
+            "tasks": [_foot_task(sole_frame, foothold, FOOTHOLD_WEIGHT)],
         },
-        {
-            "name": f"left hand on rung {hand_rung}",
-            "contacts": [
-                *_keep("left_sole", "right_sole", "right_hand"),
-                {"robot_patch": "left_hand", "surface": f"rung{hand_rung}", **hand},
-            ],
-        },
-        {
-            "name": "left foot on rung 2",
-            "contacts": [
-                *_keep("right_sole", "right_hand", "left_hand"),
-                _foot_on_rung("left_sole", 2, True),
-            ],
-        },
+        foot_on("left_sole", "right_sole", 2),
     ]
     feet = {"left_sole": 2, "right_sole": 1}
     hands = {"left_hand": hand_rung, "right_hand": hand_rung}
     for _ in range(max(0, steps)):
         for foot, other in (("right_sole", "left_sole"), ("left_sole", "right_sole")):
-            feet[foot] += 2
-            stages.append(
-                {
-                    "name": f"{foot.split('_')[0]} foot on rung {feet[foot]}",
-                    "contacts": [
-                        *_keep(other, "right_hand", "left_hand"),
-                        _foot_on_rung(foot, feet[foot], True),
-                    ],
-                }
-            )
+            # the hands first, so that the foot climbs with them a rung higher
             for h, o in (("right_hand", "left_hand"), ("left_hand", "right_hand")):
                 hands[h] += 1
-                stages.append(
-                    {
-                        "name": f"{h.replace('_', ' ')} on rung {hands[h]}",
-                        "contacts": [
-                            *_keep("left_sole", "right_sole", o),
-                            {"robot_patch": h, "surface": f"rung{hands[h]}", **hand},
-                        ],
-                    }
-                )
+                stages.append(hand_on(h, hands[h], ("left_sole", "right_sole", o)))
+            feet[foot] += 2
+            stages.append(foot_on(foot, other, feet[foot]))
     return {
         "name": "ladder-vertical",
         "description": "vertical ladder, 2.5 cm rungs: left foot to rung 2 (geometric) with "
         "the right foot and both hands fixed",
         "robot": robot_spec(robot),
         "mu": 0.7,
+        "friction": LADDER_FRICTION,
         "surfaces": surfaces,
         "obstacles": obstacles,
         "initial": {"base": [0.0, 0.0, 0.0]},
