@@ -203,9 +203,32 @@ def test_verify_rejects_an_ellipse_outside_or_too_small(talos):
     assert "contact ellipse size" in {c.name for c in verify_posture(bad, talos.model).failures}
 
 
+def test_yaw_range_turns_the_floating_foot_and_verify_checks_it(talos):
+    """Free, the foot on the step keeps about the ground foot's heading; bounded to
+    [0.4, 0.6] rad it turns into that range, and verify rejects a posture outside it."""
+    free = solve(problem_from_dict(step_problem({"type": "support"}, depth=0.3)))
+    assert free.success, free.message
+    problem = problem_from_dict(step_problem({"type": "support", "yaw_range": [0.4, 0.6]}, 0.3))
+    assert problem.constraint_counts()["contact.right_sole.yaw_range"] == 1
+    r = solve(problem)
+    assert r.success, r.message
+    c = problem.contacts[1]
+    free_yaw = c.realized_pose(talos.model, free.q)[1]  # in the step's frame
+    yaw = c.realized_pose(talos.model, r.q)[1]
+    assert not 0.4 <= free_yaw <= 0.6  # the bound is active: it changed the posture
+    assert 0.4 - 1e-6 <= yaw <= 0.6 + 1e-6
+    assert r.posture["contacts"][1]["yaw_range"] == [0.4, 0.6]
+    bad = copy.deepcopy(r.posture)
+    bad["contacts"][1]["yaw_range"] = [yaw + 0.05, yaw + 0.3]
+    assert "contact geometry" in {c.name for c in verify_posture(bad, talos.model).failures}
+
+
 @pytest.mark.parametrize(
     ("contact", "field"),
     [
+        ({"type": "support", "yaw_range": [0.5, -0.5]}, "contacts[1].yaw_range"),
+        ({"type": "geometric", "yaw_range": [0.0, 7.0]}, "contacts[1].yaw_range"),
+        ({"type": "inclusive", "yaw_range": [0.0]}, "contacts[1].yaw_range"),
         ({"type": "geometric", "formulation": "exact"}, "contacts[1].formulation"),
         ({"type": "geometric", "min_radii": [0.1, -0.1]}, "contacts[1].min_radii"),
         ({"type": "geometric", "position": [0, 0]}, "contacts[1].position"),

@@ -8,12 +8,47 @@ import numpy as np
 import pytest
 
 from posturegen.cli import _demo_dir
-from posturegen.spec import load_problem
+from posturegen.spec import load_problem, problem_from_dict
+
+# floating contacts with every option that adds rows or costs: a support foot (forces on its
+# ellipse's boundary) and a geometric foot (the paper's form, area maximized), both with yaw
+# bounds, the second on a step shorter than the foot
+FLOATING = {
+    "robot": "talos",
+    "surfaces": [
+        {"name": "ground", "vertices": [[-1, -1], [1, -1], [1, 1], [-1, 1]]},
+        {
+            "name": "step",
+            "position": [0.3, -0.1, 0.1],
+            "rpy": [0, 0, 0.1],
+            "vertices": [[-0.06, -0.3], [0.06, -0.3], [0.06, 0.3], [-0.06, 0.3]],
+        },
+    ],
+    "contacts": [
+        {
+            "robot_patch": "left_sole",
+            "surface": "ground",
+            "type": "support",
+            "yaw_range": [-0.3, 0.4],
+        },
+        {
+            "robot_patch": "right_sole",
+            "surface": "step",
+            "type": "geometric",
+            "formulation": "paper",
+            "maximize_area": 1.0,
+            "yaw_range": [-0.5, 0.2],
+        },
+    ],
+}
 
 
-@pytest.fixture(scope="module")
-def program():
-    problem = load_problem(_demo_dir() / "stand-reach.yaml")
+@pytest.fixture(scope="module", params=["stand-reach", "floating"])
+def program(request):
+    if request.param == "floating":
+        problem = problem_from_dict(FLOATING)
+    else:
+        problem = load_problem(_demo_dir() / "stand-reach.yaml")
     compiled = problem.compile()
     x0, p, _, _ = problem.numeric(compiled)
     return compiled, x0, p

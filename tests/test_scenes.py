@@ -150,16 +150,21 @@ def test_vertical_ladder_stages_follow_the_paper() -> None:
     thin, wide = last[3]["min_radii"]
     assert 2 * thin >= 0.5 * scenes.RUNG_THICKNESS and 2 * wide >= 0.75 * size.sole_width
     assert seq["friction"] == {"model": "pyramid", "faces": 8}
-    # a climb: the hands move up a rung each before each foot climbs two
-    climb = [s["name"] for s in scenes.ladder_vertical("hrp2", steps=1)["stages"]][5:]
-    assert climb == [
-        "right hand on rung 6",
-        "left hand on rung 6",
-        "right foot on rung 3",
+    # a climb: before each foot climbs two rungs, the hands go five rungs above the other foot
+    climb = scenes.ladder_vertical("hrp2", steps=1)["stages"]
+    assert [s["name"] for s in climb[5:]] == [
         "right hand on rung 7",
         "left hand on rung 7",
+        "right foot on rung 3",
+        "right hand on rung 8",
+        "left hand on rung 8",
         "left foot on rung 4",
     ]
+    # every foot after the first is guided to its own side of the middle, on its rung
+    for stage, side, rung in ((seq["stages"][4], 1, 2), (climb[7], -1, 3), (climb[10], 1, 4)):
+        (task,) = stage["tasks"]
+        assert task["target"][1] == pytest.approx(side * scenes.CLIMB_FOOT_Y)
+        assert task["target"][2] == pytest.approx(rung * scenes.RUNG_SPACING)
 
 
 def test_inclined_ladder_lifts_the_left_foot_before_placing_it() -> None:
@@ -210,3 +215,26 @@ def test_scene_demo_writes_only_verified_postures(name: str, robot: str, tmp_pat
     if (name, robot) in VERIFIED:
         assert rc == 0, index["stages"][-1]["message"]
         assert verify_file(tmp_path / "posture.json").ok
+
+
+# the shipped climbs (issue 5): stairs >= 4 steps on ATLAS, the vertical ladder on HRP-2 with
+# each foot two rungs above the demo's (ending on rungs 3 and 4); every stage verified
+CLIMBS = [
+    ("stairs", "atlas", 4, "left foot on step 4"),
+    ("ladder-vertical", "hrp2", 1, "left foot on rung 4"),
+]
+
+
+@pytest.mark.parametrize(("name", "robot", "steps", "last"), CLIMBS)
+def test_climb_verifies_every_stage(
+    name: str, robot: str, steps: int, last: str, tmp_path: Path
+) -> None:
+    from posturegen.cli import main
+
+    rc = main(["climb", name, "--robot", robot, "--steps", str(steps), "--out", str(tmp_path)])
+    index = json.loads((tmp_path / "sequence.json").read_text())
+    assert rc == 0, index["stages"][-1]["message"]
+    assert len(index["stages"]) == index["planned_stages"]
+    assert index["stages"][-1]["name"] == last
+    for stage in index["stages"]:
+        assert verify_file(tmp_path / stage["posture"]).ok, stage["name"]

@@ -266,14 +266,31 @@ class EllipseOptions:
     scaling: str | float = "auto"
 
 
+@dataclass
 class FloatingContact(Contact):
     """A robot patch on a surface plane, free to slide and turn in it (paper eq. 2):
-    (O_c - O_s)·N_s = 0, T_c·N_s = 0, B_c·N_s = 0, N_c·N_s <= 0."""
+    (O_c - O_s)·N_s = 0, T_c·N_s = 0, B_c·N_s = 0, N_c·N_s <= 0.
+
+    ``yaw_range`` = (ψ_min, ψ_max) [rad] bounds its yaw ψ in the surface frame (the angle of
+    the patch's x axis, as for a fixed contact) by one smooth row,
+    cos(ψ - ψ_mid) >= cos(ψ_half), i.e. (cos ψ_mid, sin ψ_mid)·(R_sc[0,0], R_sc[1,0]) >= cos ψ_half.
+    """
 
     name: str
     patch: Patch
     surface: Surface
     mu: float
+    yaw_range: tuple[float, float] | None = field(default=None, kw_only=True)
+
+    def _plane_key(self) -> tuple[Any, ...]:
+        """The structure this base adds to a subclass's key."""
+        return ("yaw_range", self.yaw_range is not None)
+
+    def _base_dict(self) -> dict[str, Any]:
+        out = super()._base_dict()
+        if self.yaw_range is not None:
+            out["yaw_range"] = [float(v) for v in self.yaw_range]
+        return out
 
     def _declare_plane(self, ctx: BuildContext) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
         """Coplanarity rows; returns (R_ws (3,3), p_ws (3,), patch vertices in the surface
@@ -287,6 +304,11 @@ class FloatingContact(Contact):
         d = Rs.T @ (p_c - ps)
         nlp.constrain(f"{pre}.coplanarity", ca.vertcat(d[2], E[2, 0], E[2, 1]), 0.0, 0.0)
         nlp.constrain(f"{pre}.normals_opposite", E[2, 2], -np.inf, 0.0)
+        if self.yaw_range is not None:
+            yr = nlp.parameter(f"{pre}.yaw_range", 3)  # cos ψ_mid, sin ψ_mid, cos ψ_half
+            nlp.constrain(
+                f"{pre}.yaw_range", yr[0] * E[0, 0] + yr[1] * E[1, 0] - yr[2], 0.0, np.inf
+            )
         v = self.patch.polygon.vertices
         # patch vertices in the surface plane; the flip of the normal reverses the orientation
         rows = [d[:2] + E[:2, :2] @ v[i] for i in reversed(range(len(v)))]
@@ -294,10 +316,17 @@ class FloatingContact(Contact):
 
     def _plane_parameters(self) -> dict[str, np.ndarray]:
         pre = f"contact.{self.name}"
-        return {
+        out = {
             f"{pre}.R_surface": self.surface.T_world_surface.rotation,
             f"{pre}.p_surface": self.surface.T_world_surface.translation,
         }
+        if self.yaw_range is not None:
+            mid, half = (
+                0.5 * (self.yaw_range[0] + self.yaw_range[1]),
+                0.5 * (self.yaw_range[1] - self.yaw_range[0]),
+            )
+            out[f"{pre}.yaw_range"] = np.array([np.cos(mid), np.sin(mid), np.cos(half)])
+        return out
 
     def _surface_halfplanes(self, ctx: BuildContext) -> tuple[ca.SX, ca.SX]:
         """Parameters: outward unit normals (n, 2) and offsets (n,) of the surface polygon."""
@@ -447,6 +476,7 @@ class GeometricContact(_EllipseContact):
             self.surface.polygon.n,
             self.ellipse,
             self.scaled,
+            *self._plane_key(),
         )
 
     def declare(self, ctx: BuildContext) -> None:
@@ -498,6 +528,7 @@ class SupportContact(_EllipseContact):
             self.scaled,
             self.points,
             self.friction,
+            *self._plane_key(),
         )
 
     def declare(self, ctx: BuildContext) -> None:
@@ -547,7 +578,7 @@ class InclusiveContact(FloatingContact):
     type: str = "inclusive"
 
     def key(self) -> tuple[Any, ...]:
-        return ("inclusive", self.name, self.patch.name, self.surface.polygon.n)
+        return ("inclusive", self.name, self.patch.name, self.surface.polygon.n, *self._plane_key())
 
     def declare(self, ctx: BuildContext) -> None:
         V = self._declare_plane(ctx)[2]
@@ -575,7 +606,7 @@ class PointContact(FloatingContact):
     type: str = "point"
 
     def key(self) -> tuple[Any, ...]:
-        return ("point", self.name, self.patch.name, self.surface.polygon.n)
+        return ("point", self.name, self.patch.name, self.surface.polygon.n, *self._plane_key())
 
     def declare(self, ctx: BuildContext) -> None:
         Rs, ps, _, E, d = self._declare_plane(ctx)

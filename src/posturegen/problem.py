@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import collections
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import casadi as ca
@@ -177,7 +177,21 @@ class SolverOptions:
 
 
 @dataclass
-class CompiledNLP:
+class _Layout:
+    """Where each named block sits in x, p and g, the cost terms' names, and the bounds."""
+
+    x_index: dict[str, slice]
+    p_index: dict[str, slice]
+    g_index: dict[str, slice]
+    cost_names: list[str]
+    lbx: np.ndarray
+    ubx: np.ndarray
+    lbg: np.ndarray
+    ubg: np.ndarray
+
+
+@dataclass
+class CompiledNLP(_Layout):
     """A built solver with the layout of its x, p and g vectors.
 
     ``solver`` runs CasADi's virtual machine until the structure's generated C is available
@@ -188,14 +202,6 @@ class CompiledNLP:
     solver: ca.Function
     nlp: ca.Function  # (x, p) -> (f, g): the program itself, for inspection and tests
     outputs: ca.Function  # (x, p) -> outputs
-    x_index: dict[str, slice]
-    p_index: dict[str, slice]
-    g_index: dict[str, slice]
-    cost_names: list[str]
-    lbx: np.ndarray
-    ubx: np.ndarray
-    lbg: np.ndarray
-    ubg: np.ndarray
     build_time_s: float
     ipopt_options: dict[str, Any] = field(default_factory=dict)
     codegen_mode: str = "off"
@@ -238,7 +244,7 @@ def _layout(blocks: dict[str, Any], size: Any) -> dict[str, slice]:
 
 
 @dataclass
-class _Program:
+class _Program(_Layout):
     """The symbolic program of one structure: min f(x, p) s.t. lbg <= g(x, p) <= ubg,
     lbx <= x <= ubx, with the layout of x, p and g, shared by its solver-option variants."""
 
@@ -248,14 +254,6 @@ class _Program:
     g: ca.SX
     function: ca.Function  # (x, p) -> (f, g)
     outputs: ca.Function  # (x, p) -> outputs and cost terms
-    x_index: dict[str, slice]
-    p_index: dict[str, slice]
-    g_index: dict[str, slice]
-    cost_names: list[str]
-    lbx: np.ndarray
-    ubx: np.ndarray
-    lbg: np.ndarray
-    ubg: np.ndarray
 
 
 _CACHE: collections.OrderedDict[tuple[Any, ...], CompiledNLP] = collections.OrderedDict()
@@ -335,14 +333,7 @@ class Problem:
             solver=solver,
             nlp=prog.function,
             outputs=prog.outputs,
-            x_index=prog.x_index,
-            p_index=prog.p_index,
-            g_index=prog.g_index,
-            cost_names=prog.cost_names,
-            lbx=prog.lbx,
-            ubx=prog.ubx,
-            lbg=prog.lbg,
-            ubg=prog.ubg,
+            **{f.name: getattr(prog, f.name) for f in fields(_Layout)},
             build_time_s=time.perf_counter() - t0,
             ipopt_options=opts,
             codegen_mode=mode,

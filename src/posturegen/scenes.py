@@ -262,11 +262,17 @@ def _steps_geometry(
     return surfaces
 
 
+# [rad] each foot's yaw on a step, either way from straight up the stairs: free, the maximized
+# ellipse turns the foot across the short step (ATLAS: -1.28 rad on step 1, and its climb
+# failed at step 4)
+STAIR_FOOT_YAW = 0.35
+
+
 def stairs(robot: str, steps: int = 2) -> dict[str, Any]:
     """Paper V-C: steps shorter than the foot (0.65× its length), each next riser an obstacle;
     each stage puts one foot on the next step maximizing the contact ellipse (eq. 8), so the
-    foot overhangs the edge as far as the riser allows; the last step is deep enough for the
-    whole foot."""
+    foot overhangs the edge as far as the riser allows, pointing up the stairs within
+    ±STAIR_FOOT_YAW; the last step is deep enough for the whole foot."""
     size = robot_size(robot)
     depth = round(0.65 * size.sole_length, 3)
     rise = 0.12
@@ -290,6 +296,7 @@ def stairs(robot: str, steps: int = 2) -> dict[str, Any]:
                         "type": "support",
                         "min_radii": [0.02, 0.02],
                         "maximize_area": 10.0,
+                        "yaw_range": [-STAIR_FOOT_YAW, STAIR_FOOT_YAW],
                     },
                 ],
             }
@@ -454,6 +461,10 @@ STILE_CLEARANCE = 0.1  # [m] from the shoulders to the stiles
 # 0.92 μ.
 LADDER_FRICTION: dict[str, Any] = {"model": "pyramid", "faces": 8}
 RUNG_FOOT_Y = 0.0  # [m] the first foot's target on rung 1, right of the middle
+# [m] the target of every later foot, this far left (left foot) or right (right foot) of the
+# middle: without it the left foot landed 20 cm left of the middle on rung 2, and HRP-2 then
+# could not stand on it alone (2.05x its left wrist's limit) to lift its right foot
+CLIMB_FOOT_Y = 0.05
 
 
 def _foot_on_rung(patch: str, k: int, geometric: bool, sole_width: float) -> dict[str, Any]:
@@ -474,7 +485,9 @@ def ladder_vertical(robot: str, steps: int = 0) -> dict[str, Any]:
     foot on rung 1; the left foot goes on rung 2 as a geometric contact whose ellipse spans the
     foot's width and the rung's thickness, the right foot and both hands fixed. With
     ``steps`` = K > 0 the climb goes on: each foot climbs K more rungs, two at a time, after
-    the hands moved up one rung each.
+    both hands moved up to ``hand_rung`` rungs above the other foot (one rung more than at the
+    start: HRP-2 could not lift its right foot from rung 1 to 3 with its hands on rung 6,
+    2.0x its wrist's limit, its knees held behind rung 4, but could with them on rung 7).
 
     Measured on HRP-2, each change alone makes the last stage fail: the hands on rung 4 (below
     the shoulders) instead of 5; the right foot first, the hands after it; rungs every 30 cm
@@ -484,7 +497,8 @@ def ladder_vertical(robot: str, steps: int = 0) -> dict[str, Any]:
     23, 27 or 30 cm). The demo solves with the standoff from 23 to 30 cm (not 20: the right
     foot's stage fails) and the foothold task's weight from 0.5 to 2."""
     size = robot_size(robot)
-    sole_frame = load_robot(robot_spec(robot)).patch("right_sole").frame
+    model = load_robot(robot_spec(robot))
+    sole_frames = {p: model.patch(p).frame for p in ("left_sole", "right_sole")}
     xl = 0.5 * size.sole_length + LADDER_STANDOFF
     # the hands on the first rung at or above the shoulders (HRP-2: rung 5, 1.25 m)
     hand_rung = max(3, math.ceil(size.shoulder_height / RUNG_SPACING))
@@ -508,17 +522,21 @@ def ladder_vertical(robot: str, steps: int = 0) -> dict[str, Any]:
             "contacts": [*_keep(*keep), {"robot_patch": h, "surface": f"rung{k}", **hand}],
         }
 
+    def foothold(k: int, y: float) -> list[float]:
+        """The sole frame's target on rung k: its toes on the rung's near half."""
+        return [xl - 0.5 * size.sole_length - 0.01, y, k * RUNG_SPACING]
+
     def foot_on(foot: str, other: str, k: int) -> dict[str, Any]:
+        y = CLIMB_FOOT_Y if foot == "left_sole" else -CLIMB_FOOT_Y
         return {
             "name": f"{foot.split('_')[0]} foot on rung {k}",
             "contacts": [
                 *_keep(other, "right_hand", "left_hand"),
                 _foot_on_rung(foot, k, True, size.sole_width),
             ],
+            "tasks": [_foot_task(sole_frames[foot], foothold(k, y), FOOTHOLD_WEIGHT)],
         }
 
-    # the right sole frame with its toes on rung 1's near half
-    foothold = [xl - 0.5 * size.sole_length - 0.01, -RUNG_FOOT_Y, RUNG_SPACING]
     stages: list[dict[str, Any]] = [
         {"name": "stand", "contacts": _feet_on_ground(half_width=size.stance_half_width)},
         hand_on("right_hand", hand_rung, ("left_sole", "right_sole")),
@@ -529,7 +547,9 @@ def ladder_vertical(robot: str, steps: int = 0) -> dict[str, Any]:
                 *_keep("left_sole", "right_hand", "left_hand"),
                 _foot_on_rung("right_sole", 1, False, size.sole_width),
             ],
-            "tasks": [_foot_task(sole_frame, foothold, FOOTHOLD_WEIGHT)],
+            "tasks": [
+                _foot_task(sole_frames["right_sole"], foothold(1, -RUNG_FOOT_Y), FOOTHOLD_WEIGHT)
+            ],
         },
         foot_on("left_sole", "right_sole", 2),
     ]
@@ -537,9 +557,9 @@ def ladder_vertical(robot: str, steps: int = 0) -> dict[str, Any]:
     hands = {"left_hand": hand_rung, "right_hand": hand_rung}
     for _ in range(max(0, steps)):
         for foot, other in (("right_sole", "left_sole"), ("left_sole", "right_sole")):
-            # the hands first, so that the foot climbs with them a rung higher
+            # the hands first, hand_rung rungs above the foot that stays
             for h, o in (("right_hand", "left_hand"), ("left_hand", "right_hand")):
-                hands[h] += 1
+                hands[h] = feet[other] + hand_rung
                 stages.append(hand_on(h, hands[h], ("left_sole", "right_sole", o)))
             feet[foot] += 2
             stages.append(foot_on(foot, other, feet[foot]))

@@ -90,11 +90,25 @@ def _friction(value: Any, field: str) -> FrictionModel:
 _ELLIPSE_KEYS = ["formulation", "min_radii", "min_area", "maximize_area", "scaling"]
 _CONTACT_KEYS = {
     "fixed": ["position", "yaw", "mu", "friction"],
-    "geometric": _ELLIPSE_KEYS,
-    "support": [*_ELLIPSE_KEYS, "points", "mu", "friction"],
-    "inclusive": [],
-    "point": ["point"],
+    "geometric": [*_ELLIPSE_KEYS, "yaw_range"],
+    "support": [*_ELLIPSE_KEYS, "points", "mu", "friction", "yaw_range"],
+    "inclusive": ["yaw_range"],
+    "point": ["point", "yaw_range"],
 }
+
+
+def _yaw_range(c: dict[str, Any], fld: str) -> tuple[float, float] | None:
+    """A floating contact's optional yaw bounds [ψ_min, ψ_max] (rad), less than a turn apart."""
+    if c.get("yaw_range") is None:
+        return None
+    lo, hi = (float(v) for v in F.vector(c["yaw_range"], 2, f"{fld}.yaw_range"))
+    if not lo < hi < lo + 2 * np.pi:
+        raise InputError(
+            f"{fld}.yaw_range",
+            f"[{lo:g}, {hi:g}] is not an interval shorter than a turn",
+            "write [min, max] in rad with min < max < min + 2π (omit it for any yaw)",
+        )
+    return lo, hi
 
 
 def _ellipse_options(c: Any, fld: str) -> EllipseOptions:
@@ -152,15 +166,17 @@ def _contact(
     names.add(name)
     mu_c = F.number(c.get("mu", mu), f"{fld}.mu", minimum=0.0)
     fric = _friction(c["friction"], f"{fld}.friction") if "friction" in c else friction
+    yr = _yaw_range(c, fld)
     if ctype == "geometric":
-        return GeometricContact(name, patch, surface, mu_c, _ellipse_options(c, fld))
+        return GeometricContact(name, patch, surface, mu_c, _ellipse_options(c, fld), yaw_range=yr)
     if ctype == "support":
         k = c.get("points", 8)
         if isinstance(k, bool) or not isinstance(k, int) or k < 4:
             raise InputError(f"{fld}.points", f"expected an integer >= 4, got {k!r}", "use 8")
-        return SupportContact(name, patch, surface, mu_c, _ellipse_options(c, fld), k, fric)
+        ell = _ellipse_options(c, fld)
+        return SupportContact(name, patch, surface, mu_c, ell, k, fric, yaw_range=yr)
     if ctype == "inclusive":
-        return InclusiveContact(name, patch, surface, mu_c)
+        return InclusiveContact(name, patch, surface, mu_c, yaw_range=yr)
     if ctype == "point":
         point = F.vector(c.get("point", [0.0, 0.0]), 2, f"{fld}.point")
         if not patch.polygon.contains(point[None])[0]:
@@ -169,7 +185,7 @@ def _contact(
                 "the point is outside the robot patch",
                 "give a point of the patch polygon, in the patch frame",
             )
-        return PointContact(name, patch, surface, mu_c, point)
+        return PointContact(name, patch, surface, mu_c, point, yaw_range=yr)
     if "position" not in c:
         raise InputError(
             f"{fld}.position",

@@ -7,8 +7,8 @@ FILE`` and :func:`posturegen.solve.solve` run exactly the same checks:
 - torques within effort limits, and the static equilibrium ``[0; τ] + Σ J_iᵀ f_i - g(q) = 0``
   with J_i the Jacobian of each force's application point (its frame's joint);
 - contact geometry: each robot patch lies in its surface plane with opposite normals, a fixed
-  contact sits at its given pose, each force point lies in both polygons, each ellipse lies in
-  both polygons;
+  contact sits at its given pose, a floating one within its yaw range, each force point lies in
+  both polygons, each ellipse lies in both polygons;
 - friction: each force inside its exact cone |f_t| <= μ f_n (f_n >= 0);
 - tasks: each hard target reached.
 """
@@ -153,6 +153,10 @@ def verify_posture(
                 float(np.abs(T_sc.translation[:2] - pos).max()),
                 abs(float(np.arctan2(np.sin(_yaw(T_sc) - yaw), np.cos(_yaw(T_sc) - yaw)))),
             )
+        if contact.get("yaw_range") is not None:  # a floating contact's yaw bounds [rad]
+            lo, hi = (float(v) for v in contact["yaw_range"])
+            off = _yaw(T_sc) - 0.5 * (lo + hi)
+            geo = max(geo, abs(float(np.arctan2(np.sin(off), np.cos(off)))) - 0.5 * (hi - lo))
         mu = float(contact["mu"])
         for f in contact.get("forces", []):
             p_w = np.asarray(f["point"], dtype=float)
