@@ -272,9 +272,8 @@ class FloatingContact(Contact):
     (O_c - O_s)·N_s = 0, T_c·N_s = 0, B_c·N_s = 0, N_c·N_s <= 0.
 
     ``yaw_range`` = (ψ_min, ψ_max) [rad] bounds its yaw ψ in the surface frame (the angle of
-    the patch's x axis, as for a fixed contact) by one smooth row,
-    cos(ψ - ψ_mid) >= cos(ψ_half), i.e. (cos ψ_mid, sin ψ_mid)·(R_sc[0,0], R_sc[1,0]) >= cos ψ_half.
-    """
+    the patch's x axis, as for a fixed contact) by one smooth row, cos(ψ - ψ_mid) >= cos(ψ_half):
+    (cos ψ_mid, sin ψ_mid)·(R_sc[0,0], R_sc[1,0]) >= cos ψ_half."""
 
     name: str
     patch: Patch
@@ -321,10 +320,8 @@ class FloatingContact(Contact):
             f"{pre}.p_surface": self.surface.T_world_surface.translation,
         }
         if self.yaw_range is not None:
-            mid, half = (
-                0.5 * (self.yaw_range[0] + self.yaw_range[1]),
-                0.5 * (self.yaw_range[1] - self.yaw_range[0]),
-            )
+            lo, hi = self.yaw_range
+            mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
             out[f"{pre}.yaw_range"] = np.array([np.cos(mid), np.sin(mid), np.cos(half)])
         return out
 

@@ -462,8 +462,8 @@ STILE_CLEARANCE = 0.1  # [m] from the shoulders to the stiles
 LADDER_FRICTION: dict[str, Any] = {"model": "pyramid", "faces": 8}
 RUNG_FOOT_Y = 0.0  # [m] the first foot's target on rung 1, right of the middle
 # [m] the target of every later foot, this far left (left foot) or right (right foot) of the
-# middle: without it the left foot landed 20 cm left of the middle on rung 2, and HRP-2 then
-# could not stand on it alone (2.05x its left wrist's limit) to lift its right foot
+# middle. Unguided, HRP-2's left foot landed 20 cm left of the middle on rung 2, and its climb
+# (steps=1) failed at "left hand on rung 8" (its body's proxies against the ladder)
 CLIMB_FOOT_Y = 0.05
 
 
