@@ -38,6 +38,7 @@ import pinocchio as pin
 from .errors import InputError, ModelError
 from .problem import BuildContext, Problem, Term
 from .robot import Robot
+from .verify import adjacent_joints
 
 PROXY_VERSION = 5
 BETA = 300.0  # [1/m] sharpness of the smooth max over box faces
@@ -228,7 +229,7 @@ def _meshes_overlapping(robot: Robot, data: pin.Data) -> set[tuple[int, int]]:
     for cp, res in zip(gm.collisionPairs, gd.collisionResults, strict=True):
         a = int(gm.geometryObjects[cp.first].parentJoint)
         b = int(gm.geometryObjects[cp.second].parentJoint)
-        if a != b and model.parents[a] != b and model.parents[b] != a and res.isCollision():
+        if not adjacent_joints(model, a, b) and res.isCollision():
             out.add((min(a, b), max(a, b)))
     return out
 
@@ -280,7 +281,7 @@ def proxy_model(robot: Robot) -> ProxyModel:
         for j in range(i + 1, len(spheres)):
             a, b = spheres[i].joint_id, spheres[j].joint_id
             key = (min(a, b), max(a, b))
-            if a == b or model.parents[a] == b or model.parents[b] == a or key in disabled:
+            if adjacent_joints(model, a, b) or key in disabled:
                 continue
             if np.linalg.norm(centers[i] - centers[j]) - radii[i] - radii[j] < REFERENCE_GAP:
                 overlapping.add(key)

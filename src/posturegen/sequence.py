@@ -231,7 +231,8 @@ RELAXED_TORQUE_SCALE = 10.0
 
 def diagnose_failure(data: dict[str, Any]) -> str:
     """Why a stage's problem dict found no posture, by solving relaxed copies of it: with the
-    torque limits ×10, without collision avoidance, then without both. One line."""
+    torque limits ×RELAXED_TORQUE_SCALE, without collision avoidance, then without both. One
+    line."""
     options = data.get("options", {}) or {}
     avoids = bool(options.get("self_collision")) or options.get("environment_collision", True)
 
@@ -255,7 +256,10 @@ def diagnose_failure(data: dict[str, Any]) -> str:
             f"{problem.robot.joint_names[j]}"
         )
     if not avoids:
-        return "no posture even with the torque limits ×10: the contacts are out of reach"
+        return (
+            f"no posture even with the torque limits ×{RELAXED_TORQUE_SCALE:g}: the contacts "
+            "are out of reach"
+        )
     free = attempt(False, True)
     if free.success:
         return (
@@ -265,8 +269,8 @@ def diagnose_failure(data: dict[str, Any]) -> str:
     if attempt(True, True).success:
         return "only by colliding and beyond its torque limits (it solves without both)"
     return (
-        "no posture even with the torque limits ×10 and without collision avoidance: "
-        "the contacts are out of reach"
+        f"no posture even with the torque limits ×{RELAXED_TORQUE_SCALE:g} and without "
+        "collision avoidance: the contacts are out of reach"
     )
 
 

@@ -151,12 +151,11 @@ def verify_posture(
             geo = max(
                 geo,
                 float(np.abs(T_sc.translation[:2] - pos).max()),
-                abs(float(np.arctan2(np.sin(_yaw(T_sc) - yaw), np.cos(_yaw(T_sc) - yaw)))),
+                abs(_wrap(_yaw(T_sc) - yaw)),
             )
         if contact.get("yaw_range") is not None:  # a floating contact's yaw bounds [rad]
             lo, hi = (float(v) for v in contact["yaw_range"])
-            off = _yaw(T_sc) - 0.5 * (lo + hi)
-            geo = max(geo, abs(float(np.arctan2(np.sin(off), np.cos(off)))) - 0.5 * (hi - lo))
+            geo = max(geo, abs(_wrap(_yaw(T_sc) - 0.5 * (lo + hi))) - 0.5 * (hi - lo))
         mu = float(contact["mu"])
         for f in contact.get("forces", []):
             p_w = np.asarray(f["point"], dtype=float)
@@ -252,7 +251,7 @@ def _self_pairs_model(
         a = int(gm.geometryObjects[cp.first].parentJoint)
         b = int(gm.geometryObjects[cp.second].parentJoint)
         names = tuple(sorted((model.names[a], model.names[b])))
-        if a == b or model.parents[a] == b or model.parents[b] == a or names in excluded:
+        if adjacent_joints(model, a, b) or names in excluded:
             continue
         keep.append(cp)
     gm.removeAllCollisionPairs()
@@ -332,6 +331,17 @@ def geometry_of_posture(posture: dict[str, Any], model: pin.Model) -> pin.Geomet
             f"cannot load the collision meshes: {exc}",
             "give the folders that hold the URDF's meshes",
         ) from exc
+
+
+def adjacent_joints(model: pin.Model, a: int, b: int) -> bool:
+    """Joints a and b are one joint, or parent and child: their links touch by design and are
+    never checked against each other."""
+    return a == b or model.parents[a] == b or model.parents[b] == a
+
+
+def _wrap(angle: float) -> float:
+    """The angle in (-π, π] [rad]."""
+    return float(np.arctan2(np.sin(angle), np.cos(angle)))
 
 
 def _yaw(T_sc: pin.SE3) -> float:
