@@ -332,6 +332,12 @@ STEP_FOOT_Y = 0.05  # [m] the first foot's target on step 1, right of the middle
 TOE_CLEARANCE = 0.04  # [m]
 
 
+def _sole_frames(robot: str) -> dict[str, str]:
+    """The frames of the robot's sole patches, by patch name."""
+    model = load_robot(robot_spec(robot))
+    return {p: model.patch(p).frame for p in ("left_sole", "right_sole")}
+
+
 def _foot_task(frame: str, target: list[float], weight: float) -> dict[str, Any]:
     """A soft position task on a sole frame."""
     return {"type": "position", "frame": frame, "target": target, "weight": weight}
@@ -358,7 +364,7 @@ def ladder_inclined(robot: str, steps: int = 1) -> dict[str, Any]:
     bearing forces); the left foot is lifted, then goes on step 2 as a geometric contact whose
     ellipse radii are at least 40 % of the step's width (its depth, 12 cm)."""
     size = robot_size(robot)
-    frames = {p: load_robot(robot_spec(robot)).patch(p).frame for p in ("left_sole", "right_sole")}
+    frames = _sole_frames(robot)
     alpha, rise, depth = math.radians(60.0), 0.2, 0.12
     width = max(0.5, 2 * (size.shoulder_half_width + RAIL_CLEARANCE))
     run = rise / math.tan(alpha)  # horizontal distance between steps
@@ -497,8 +503,7 @@ def ladder_vertical(robot: str, steps: int = 0) -> dict[str, Any]:
     23, 27 or 30 cm). The demo solves with the standoff from 23 to 30 cm (not 20: the right
     foot's stage fails) and the foothold task's weight from 0.5 to 2."""
     size = robot_size(robot)
-    model = load_robot(robot_spec(robot))
-    sole_frames = {p: model.patch(p).frame for p in ("left_sole", "right_sole")}
+    sole_frames = _sole_frames(robot)
     xl = 0.5 * size.sole_length + LADDER_STANDOFF
     # the hands on the first rung at or above the shoulders (HRP-2: rung 5, 1.25 m)
     hand_rung = max(3, math.ceil(size.shoulder_height / RUNG_SPACING))
