@@ -43,13 +43,26 @@ class PostureCost(Term):
         )
 
     def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
+        robot = problem.robot
+        qj0 = robot.q_init[7:] if self.reference == "default" else problem.q_init[7:]
         return {
-            "posture.joints0": (
-                problem.robot.q_init[7:] if self.reference == "default" else problem.q_init[7:]
-            ),
+            "posture.joints0": reference_inside_limits(qj0, robot.q_lower, robot.q_upper),
             "posture.base0": problem.q_init[0:3],
             "posture.weight": np.array([self.weight]),
         }
+
+
+# [rad or m] how far inside its limits a joint's posture reference is put. A reference on a
+# limit (Talos' grippers at 0 = their upper limit) makes the optimum a degenerate active
+# bound (zero multiplier): IPOPT then converges linearly, the step halving each iteration,
+# about 6 of the 18 median iterations of talos-stand-reach.
+REFERENCE_INSET = 0.01
+
+
+def reference_inside_limits(qj0: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """qj0 (nj,) clipped to [lower + δ, upper - δ], δ = min(REFERENCE_INSET, range/4)."""
+    inset = np.minimum(REFERENCE_INSET, 0.25 * np.where(upper > lower, upper - lower, 0.0))
+    return np.clip(qj0, lower + inset, upper - inset)
 
 
 @dataclass

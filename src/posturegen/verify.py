@@ -224,9 +224,11 @@ def verify_posture(
 TOL_PENETRATION = 0.002  # a robot mesh may be at most this far inside a scene box [m]
 
 
-# filtered geometry models of the self-collision check, per (model, geometry, SRDF,
-# exclusions); the model and geometry objects are held so that their ids stay theirs
-_SELF_PAIRS: dict[tuple[Any, ...], tuple[pin.Model, pin.GeometryModel, pin.GeometryModel]] = {}
+# filtered geometry models of the self-collision check and their data, per (model, geometry,
+# SRDF, exclusions); the model and geometry objects are held so that their ids stay theirs
+_SELF_PAIRS: dict[
+    tuple[Any, ...], tuple[pin.Model, pin.GeometryModel, pin.GeometryModel, pin.GeometryData]
+] = {}
 
 
 def _self_pairs_model(
@@ -234,14 +236,15 @@ def _self_pairs_model(
     geometry: pin.GeometryModel,
     srdf: str | None,
     excluded: frozenset[tuple[str, ...]],
-) -> pin.GeometryModel:
+) -> tuple[pin.GeometryModel, pin.GeometryData]:
     """``geometry`` with every collision pair to check: all pairs but the SRDF's disabled
-    ones, those of one joint or of a parent and child joint, and the excluded joint pairs
-    (built once per arguments: the SRDF parse and the pair loop took 11-15 ms per call)."""
+    ones, those of one joint or of a parent and child joint, and the excluded joint pairs, and
+    a data for it (built once per arguments: the SRDF parse and the pair loop took 11-15 ms
+    per call, the data of Talos' 883 pairs 3 ms; each check overwrites the data's results)."""
     key = (id(model), id(geometry), srdf, excluded)
     hit = _SELF_PAIRS.get(key)
     if hit is not None:
-        return hit[2]
+        return hit[2], hit[3]
     gm = geometry.copy()
     gm.addAllCollisionPairs()
     if srdf:
@@ -259,8 +262,33 @@ def _self_pairs_model(
         gm.addCollisionPair(cp)
     if len(_SELF_PAIRS) >= 16:
         _SELF_PAIRS.clear()
-    _SELF_PAIRS[key] = (model, geometry, gm)
-    return gm
+    gd = gm.createData()
+    _SELF_PAIRS[key] = (model, geometry, gm, gd)
+    return gm, gd
+
+
+# per geometry model: each object's bounding sphere (centre in its joint's frame, radius) [m]
+_BOUNDS: dict[int, tuple[pin.GeometryModel, np.ndarray, np.ndarray]] = {}
+
+
+def _bounding_spheres(geometry: pin.GeometryModel) -> tuple[np.ndarray, np.ndarray]:
+    """(k, 3) centres in the parent joints' frames and (k,) radii of spheres that contain
+    each collision object (its vertices' hull: the centroid and the farthest vertex)."""
+    hit = _BOUNDS.get(id(geometry))
+    if hit is not None and hit[0] is geometry:
+        return hit[1], hit[2]
+    from .collision import geometry_points  # collision imports verify: no cycle at load time
+
+    centres, radii = [], []
+    for obj in geometry.geometryObjects:
+        pts = geometry_points(obj)
+        c = pts.mean(axis=0)
+        centres.append(c)
+        radii.append(float(np.linalg.norm(pts - c, axis=1).max()))
+    if len(_BOUNDS) >= 16:
+        _BOUNDS.clear()
+    _BOUNDS[id(geometry)] = (geometry, np.array(centres).reshape(-1, 3), np.array(radii))
+    return _BOUNDS[id(geometry)][1], _BOUNDS[id(geometry)][2]
 
 
 def mesh_collision_checks(
@@ -278,27 +306,37 @@ def mesh_collision_checks(
     if col.get("self"):
         srdf = posture["robot"].get("srdf")
         excluded = frozenset(tuple(sorted(p)) for p in col.get("exclude", []))
-        gm = _self_pairs_model(model, geometry, str(srdf) if srdf else None, excluded)
-        gd = gm.createData()
+        gm, gd = _self_pairs_model(model, geometry, str(srdf) if srdf else None, excluded)
         pin.updateGeometryPlacements(model, data, gm, gd)
-        pin.computeCollisions(gm, gd, False)
-        hits = [
-            f"{gm.geometryObjects[cp.first].name}/{gm.geometryObjects[cp.second].name}"
-            for cp, res in zip(gm.collisionPairs, gd.collisionResults, strict=True)
-            if res.isCollision()
-        ]
+        hits = []
+        if pin.computeCollisions(gm, gd, False):  # True when any pair collides
+            hits = [
+                f"{gm.geometryObjects[cp.first].name}/{gm.geometryObjects[cp.second].name}"
+                for cp, res in zip(gm.collisionPairs, gd.collisionResults, strict=True)
+                if res.isCollision()
+            ]
         out.append(Check("collision: self (meshes)", float(len(hits)), 0.0, ", ".join(hits[:3])))
     hits = []
-    for box in col.get("boxes", []):
+    boxes = col.get("boxes", [])
+    if boxes:
+        # broad phase: the objects whose bounding sphere reaches a box
+        centres, radii = _bounding_spheres(geometry)
+        parents = [int(obj.parentJoint) for obj in geometry.geometryObjects]
+        world = np.array(
+            [data.oMi[j].act(c) for j, c in zip(parents, centres, strict=True)]
+        ).reshape(-1, 3)
+    for box in boxes:
         half = np.asarray(box["size"], dtype=float) / 2 - TOL_PENETRATION
         if np.any(half <= 0):
             continue
         shape = coal.Box(*(2 * half))
         T_box = pin.SE3(np.asarray(box["placement"], dtype=float))
         allowed = set(box.get("allowed_joints", []))
+        local = np.abs((world - T_box.translation) @ T_box.rotation)
+        gap = np.linalg.norm(np.maximum(local - half, 0.0), axis=1) - radii  # >0: apart
         req, res = coal.CollisionRequest(), coal.CollisionResult()
         for k, obj in enumerate(geometry.geometryObjects):
-            if model.names[int(obj.parentJoint)] in allowed:
+            if gap[k] > 0 or model.names[int(obj.parentJoint)] in allowed:
                 continue
             res.clear()
             M = gdata.oMg[k]
