@@ -245,3 +245,109 @@ def test_the_reference_posture_keeps_every_candidate_pair_apart(name):
     probe = {"robot": srdf, "collision": {"self": True, "exclude": pm.excluded_joint_pairs}}
     checks = mesh_collision_checks(probe, robot.model, robot.collision_model(), robot.q_init)
     assert checks[0].value == 0, checks[0].detail
+
+
+def test_box_rows_are_conservative_exact_near_and_saturated_far(talos):
+    """The solver's sphere-box rows r = -LSE(-d_β, -(m + s)) - m (d_β the smooth face distance
+    minus the radius, s = ENV_SATURATION): r >= 0 implies the sphere is at least the margin
+    from the box, r is within the LSE bound of d - m near the box, and r is the constant s
+    (zero gradient) once the sphere is far."""
+    from posturegen.collision import ENV_SATURATION, box_distances
+
+    data = copy.deepcopy(STAND)
+    data["tasks"][0]["target"] = [0.45, -0.3, 0.75]
+    data["obstacles"] = [{"name": "box", "box": [0.2, 0.2, 0.2], "position": [0.45, -0.3, 0.95]}]
+    problem = problem_from_dict(data)
+    result = solve(problem)
+    assert result.success, result.message
+    term = problem.collision_term
+    compiled = problem.compile()
+    rows = np.arange(compiled.n_g)[compiled.g_index["collision.env"]]
+    x0, p, _, _ = problem.numeric(compiled)
+    xs = ca.SX.sym("x", x0.size)
+    g = compiled.nlp(xs, p)[1][rows.tolist()]
+    fn = ca.Function("rows", [xs], [g, ca.jacobian(g, xs)])
+    margin = term.margin
+    sphere = np.array([i for i, _ in term.env_pairs])
+    box = np.array([k for _, k in term.env_pairs])
+    rng = np.random.default_rng(11)
+    near = far = 0
+    for x in [x0, compiled.solver(x0=x0, p=p, lbx=compiled.lbx, ubx=compiled.ubx)["x"]] + [
+        x0 + 0.3 * rng.normal(size=x0.size) for _ in range(6)
+    ]:
+        x = np.array(x).ravel()
+        r, J = (np.array(v) for v in fn(x))
+        r = r.ravel()
+        q = _configuration(problem, compiled, x)
+        pdata = talos.model.createData()
+        pin.forwardKinematics(talos.model, pdata, q)
+        d = box_distances(term.pm, term.pm.centers_world(talos.model, pdata), term.boxes)
+        d = d[sphere, box]  # max-face distance minus radius: a lower bound of the true one
+        assert np.all(r <= d - margin + 1e-9)
+        close = d - margin < 0.01
+        # LSE of the faces: at most log(6)/β low; the saturation term adds e^(-β_min s) at most
+        np.testing.assert_array_less(d[close] - margin - r[close], np.log(6.0) / BETA + 1e-6)
+        apart = d - margin > ENV_SATURATION + 0.05
+        np.testing.assert_allclose(r[apart], ENV_SATURATION, atol=1e-4)
+        assert np.abs(J[apart]).max(initial=0.0) < 1e-3
+        near, far = near + close.sum(), far + apart.sum()
+    assert near > 0 and far > 0  # both regimes were seen
+
+
+def _configuration(problem, compiled, x):
+    from posturegen.solve import configuration_from_x
+
+    return configuration_from_x(problem, compiled, np.asarray(x).ravel())
+
+
+def test_vectorized_proxy_centres_match_pinocchio(talos):
+    pm = proxy_model(talos)
+    model, data = talos.model, talos.model.createData()
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        q = talos.q_init.copy()
+        q[7:] = rng.uniform(talos.q_lower, talos.q_upper)
+        pin.forwardKinematics(model, data, q)
+        expected = np.array([data.oMi[s.joint_id].act(s.center) for s in pm.spheres])
+        np.testing.assert_allclose(pm.centers_world(model, data), expected, atol=1e-12)
+
+
+def test_mesh_box_check_finds_what_a_brute_force_check_finds(talos):
+    """The broad phase (bounding spheres of the collision objects) never hides a hit: boxes
+    dropped at random around the robot give the same hits as coal on every object."""
+    import coal
+
+    from posturegen.verify import TOL_PENETRATION
+
+    model, geometry, q = talos.model, talos.collision_model(), talos.q_init
+    data = model.createData()
+    pin.forwardKinematics(model, data, q)
+    gdata = geometry.createData()
+    pin.updateGeometryPlacements(model, data, geometry, gdata)
+    rng = np.random.default_rng(7)
+    seen = 0
+    for _ in range(25):
+        size = rng.uniform(0.05, 0.4, 3)
+        T = pin.SE3(
+            pin.rpy.rpyToMatrix(*rng.uniform(-np.pi, np.pi, 3)),
+            q[:3] + rng.normal(size=3) * [0.3, 0.3, 0.5],
+        )
+        box = {"name": "b", "placement": T.homogeneous.tolist(), "size": size.tolist()}
+        probe = {"robot": {}, "collision": {"self": False, "boxes": [box]}}
+        value = mesh_collision_checks(probe, model, geometry, q)[0].value
+        shape = coal.Box(*(size - 2 * TOL_PENETRATION))
+        brute = 0
+        for k, obj in enumerate(geometry.geometryObjects):
+            M = gdata.oMg[k]
+            res = coal.CollisionResult()
+            brute += coal.collide(
+                obj.geometry,
+                coal.Transform3s(M.rotation, M.translation),
+                shape,
+                coal.Transform3s(T.rotation, T.translation),
+                coal.CollisionRequest(),
+                res,
+            )
+        assert value == brute
+        seen += brute > 0
+    assert 0 < seen < 25  # boxes both touching and missing the robot were drawn

@@ -12,7 +12,12 @@ Distances, as smooth CasADi expressions:
 - sphere-box: the six face distances ``s_k = n_k·c - h_k`` of the box give a conservative
   distance ``max_k s_k <= dist(c, box)``; its smooth lower bound
   ``LSE_β(s) - log(6)/β <= max_k s_k`` (log-sum-exp, β = 300 /m, so at most 6 mm
-  conservative) minus the radius is the row. Hence capsule-box and mesh-box care are avoided.
+  conservative) minus the radius is the distance d, and the row is d saturated at
+  margin + ENV_SATURATION by a smooth minimum (still d >= margin; constant far from the box).
+  Hence capsule-box and mesh-box care are avoided.
+
+Self rows are one per pair of links: a smooth minimum (-LSE, SOFT_MIN_BETA) of their sphere
+pairs' distances, computed in the base frame.
 
 Rows are kept few by an active set: only the pairs closer than ``activation`` at the current
 posture enter the program; after a solve every candidate pair is checked and the violated ones

@@ -17,7 +17,8 @@ class PostureCost(Term):
 
     ``reference`` chooses qj0: ``initial`` (the problem's initial posture) or ``default`` (the
     robot's default posture, e.g. half-sitting: what a climb's stages keep coming back to,
-    while each stage still starts from the previous posture)."""
+    while each stage still starts from the previous posture), put at least
+    :data:`REFERENCE_INSET` inside the joint limits (:func:`reference_inside_limits`)."""
 
     weight: float = 1.0
     reference: str = "initial"
