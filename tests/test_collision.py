@@ -351,3 +351,25 @@ def test_mesh_box_check_finds_what_a_brute_force_check_finds(talos):
         assert value == brute
         seen += brute > 0
     assert 0 < seen < 25  # boxes both touching and missing the robot were drawn
+
+
+def test_broad_phase_of_the_self_pairs_keeps_every_close_pair(talos):
+    """self_distances_within: exact for the pairs it computes, and every pair it skips is at
+    least ``within`` apart (random postures, several thresholds)."""
+    from posturegen.collision import self_distances
+
+    pm = proxy_model(talos)
+    model, data = talos.model, talos.model.createData()
+    rng = np.random.default_rng(4)
+    for _ in range(5):
+        q = talos.q_init.copy()
+        q[7:] = rng.uniform(talos.q_lower, talos.q_upper)
+        pin.forwardKinematics(model, data, q)
+        centers = pm.centers_world(model, data)
+        exact = self_distances(pm, centers, pm.self_pairs)
+        for within in (0.0, 0.06, 0.3):
+            d = pm.self_distances_within(model, data, centers, within)
+            computed = np.isfinite(d)
+            np.testing.assert_allclose(d[computed], exact[computed], atol=1e-12)
+            assert np.all(exact[~computed] >= within)
+            assert (exact < within).sum() <= computed.sum() < len(d)  # it does skip some

@@ -156,16 +156,55 @@ class ProxyModel:
         self._local = np.array([s.center for s in self.spheres]).reshape(-1, 3)  # (S, 3)
         self._radii = np.array([s.radius for s in self.spheres])  # (S,)
         self._joints = np.unique(self._joint)  # the joints that carry spheres
+        # broad phase of the self pairs: per joint, a sphere around its proxies (centre in
+        # the joint's frame, radius); per candidate pair, the index of its pair of joints
+        n = int(self._joint.max(initial=0)) + 1
+        self._bound_local = np.zeros((n, 3))
+        self._bound_radius = np.zeros(n)
+        for j in self._joints:
+            own = self._joint == j
+            c = self._local[own].mean(axis=0)
+            self._bound_local[j] = c
+            self._bound_radius[j] = (
+                np.linalg.norm(self._local[own] - c, axis=1) + self._radii[own]
+            ).max()
+        ja, jb = self._joint[self.self_pairs[:, 0]], self._joint[self.self_pairs[:, 1]]
+        keys = np.minimum(ja, jb) * n + np.maximum(ja, jb)
+        links, self._pair_link = np.unique(keys, return_inverse=True)
+        self._link_a, self._link_b = links // n, links % n
 
-    def centers_world(self, model: pin.Model, data: pin.Data) -> np.ndarray:
-        """(S, 3) sphere centres in world for the placements already in ``data.oMi``:
-        c_world = R_j·c + p_j of each sphere's joint j."""
+    def _placements(self, model: pin.Model, data: pin.Data) -> tuple[np.ndarray, np.ndarray]:
+        """(R (njoints, 3, 3), p (njoints, 3)) of the joints carrying spheres (data.oMi)."""
         R = np.zeros((model.njoints, 3, 3))
         p = np.zeros((model.njoints, 3))
         for j in self._joints:
             M = data.oMi[int(j)]
             R[j], p[j] = M.rotation, M.translation
+        return R, p
+
+    def centers_world(self, model: pin.Model, data: pin.Data) -> np.ndarray:
+        """(S, 3) sphere centres in world for the placements already in ``data.oMi``:
+        c_world = R_j·c + p_j of each sphere's joint j."""
+        R, p = self._placements(model, data)
         return np.einsum("sij,sj->si", R[self._joint], self._local) + p[self._joint]
+
+    def self_distances_within(
+        self, model: pin.Model, data: pin.Data, centers: np.ndarray, within: float
+    ) -> np.ndarray:
+        """(n,) distances [m] of the candidate self pairs (``self_pairs``) that may be closer
+        than ``within``, +inf for the others: those whose joints' bounding spheres are
+        farther apart than ``within`` (a lower bound of every distance between their
+        proxies) are not computed (Talos: 11,775 pairs, about 0.7 ms; with the broad phase
+        0.1-0.2 ms)."""
+        R, p = self._placements(model, data)
+        b = np.einsum("jik,jk->ji", R[: len(self._bound_local)], self._bound_local)
+        b += p[: len(self._bound_local)]
+        gap = np.linalg.norm(b[self._link_a] - b[self._link_b], axis=1)
+        gap -= self._bound_radius[self._link_a] + self._bound_radius[self._link_b]
+        near = np.flatnonzero(gap[self._pair_link] < within)
+        out = np.full(len(self.self_pairs), np.inf)
+        out[near] = self_distances(self, centers, self.self_pairs[near])
+        return out
 
     @property
     def radii(self) -> np.ndarray:

@@ -190,27 +190,36 @@ def _solve_avoiding(
     Result's iterations and times. Returns the Result and every run so far."""
     runs: list[_Run] = []
     opts = problem.collision_options
-    from .collision import CollisionTerm, box_distances, env_boxes, proxy_model, self_distances
+    from .collision import CollisionTerm, box_distances, env_boxes, proxy_model
 
     robot = problem.robot
     pm = proxy_model(robot)
     boxes = env_boxes(problem)
     excluded = _excluded_pairs(problem)
-    cand_self = pm.self_pairs if opts.self_collision else np.zeros((0, 2), dtype=int)
-    if len(cand_self) and excluded:
+    # candidate self pairs: a mask over pm.self_pairs (the user's exclusions removed)
+    keep = np.full(len(pm.self_pairs), opts.self_collision, dtype=bool)
+    if opts.self_collision and excluded:
         jid = np.array([s.joint_id for s in pm.spheres])
-        keep = [(min(jid[i], jid[j]), max(jid[i], jid[j])) not in excluded for i, j in cand_self]
-        cand_self = cand_self[np.array(keep, dtype=bool)]
+        keep &= [
+            (min(jid[i], jid[j]), max(jid[i], jid[j])) not in excluded for i, j in pm.self_pairs
+        ]
+    cand_self = pm.self_pairs[keep]
     allowed = np.array(
         [[s.joint_id not in b.allowed_joints for b in boxes] for s in pm.spheres], dtype=bool
     ).reshape(len(pm.spheres), len(boxes))
     model, data = robot.model, robot.model.createData()
 
     def distances(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Candidate self and sphere-box distances at q; +inf where they cannot be below
+        margin + activation (the self pairs' broad phase) or the box may be touched."""
         pin.forwardKinematics(model, data, q)
         centers = pm.centers_world(model, data)
         d_env = box_distances(pm, centers, boxes) if boxes else np.zeros((len(centers), 0))
-        return self_distances(pm, centers, cand_self), np.where(allowed, d_env, np.inf)
+        d_self = np.zeros(0)
+        if len(cand_self):
+            d_self = pm.self_distances_within(model, data, centers, margin + opts.activation)
+            d_self = d_self[keep]
+        return d_self, np.where(allowed, d_env, np.inf)
 
     base_key = (problem.key(), len(boxes), opts.self_collision, opts.exclude)
     learned_self, learned_env = _LEARNED.get(base_key, (frozenset(), frozenset()))
