@@ -373,3 +373,40 @@ def test_broad_phase_of_the_self_pairs_keeps_every_close_pair(talos):
             np.testing.assert_allclose(d[computed], exact[computed], atol=1e-12)
             assert np.all(exact[~computed] >= within)
             assert (exact < within).sum() <= computed.sum() < len(d)  # it does skip some
+
+
+def test_the_separated_start_parts_pressed_pairs_and_keeps_the_supports(talos):
+    """In half-sitting Talos' forearms nearly touch its thighs (4 mm above the margin): the
+    first start moves the joints that carry no contact until those pairs are about
+    SEPARATION above the margin, and leaves the legs (they carry the feet) alone."""
+    from posturegen.collision import SEPARATION, self_distances, separated_start
+
+    pm = proxy_model(talos)
+    model = talos.model
+    feet = [talos.patches[n].joint_id for n in ("left_sole", "right_sole")]
+    margin = 0.01
+    candidates = np.arange(len(pm.self_pairs))
+    qj = separated_start(talos, pm, candidates, margin, talos.q_init, feet)
+
+    def closest(q):
+        data = model.createData()
+        pin.forwardKinematics(model, data, q)
+        return self_distances(pm, pm.centers_world(model, data), pm.self_pairs)
+
+    q = talos.q_init.copy()
+    q[7:] = qj
+    before, after = closest(talos.q_init), closest(q)
+    legs = [i for i, n in enumerate(talos.joint_names) if n.startswith("leg_")]
+    np.testing.assert_array_equal(qj[legs], talos.q_init[7:][legs])
+    assert np.all((talos.q_lower <= qj) & (qj <= talos.q_upper))
+    arms = np.array(
+        [
+            "arm" in model.names[pm.spheres[i].joint_id]
+            or "arm" in model.names[pm.spheres[j].joint_id]
+            for i, j in pm.self_pairs
+        ]
+    )
+    assert before[arms].min() < margin + 0.005  # pressed at the start
+    assert after[arms].min() >= margin + 0.8 * SEPARATION  # parted
+    # pairs the free joints cannot move (the two legs) keep their distance
+    np.testing.assert_allclose(after[~arms].min(), before[~arms].min(), atol=1e-9)

@@ -82,14 +82,18 @@ def _run_ipopt(
     x0: np.ndarray | None,
     lam_x0: np.ndarray | None = None,
     lam_g0: dict[str, np.ndarray] | None = None,
+    joints0: np.ndarray | None = None,
 ) -> _Run:
-    """One IPOPT run; with ``lam_g0`` (multipliers per constraint block) a warm start."""
+    """One IPOPT run; with ``lam_g0`` (multipliers per constraint block) a warm start; without
+    ``x0``, the problem's initial guess with ``joints0`` (nj,) for the joints when given."""
     built_before = problem.key() in _CACHE
     compiled = problem.compile()
     compiled.refresh()  # generated C once it is built (posturegen.codegen)
     x_init, p, lbg, ubg = problem.numeric(compiled)
     if x0 is not None and x0.shape == x_init.shape:
         x_init = x0
+    elif joints0 is not None:
+        x_init[compiled.x_index["joints"]] = joints0
     warm: dict[str, Any] = {}
     if lam_g0 is not None and lam_x0 is not None:
         lam = np.zeros(compiled.n_g)
@@ -147,7 +151,11 @@ def _map_collision_multipliers(lam: dict[str, Any], term: Any) -> dict[str, np.n
 # (a planner's next query pays no rebuild, and its first run already has the right rows).
 _LEARNED: dict[tuple[Any, ...], tuple[frozenset[tuple[int, int]], frozenset[tuple[int, int]]]] = {}
 _LEARNED_MAX_PAIRS = 160
-COLLISION_MU_INIT = 1e-2
+# collision rows start close to active: a smaller initial barrier parameter took 32 instead
+# of 44 median iterations on talos-near-body-collision (n = 20, mu_init 1e-2 against IPOPT's
+# 0.1); with the separated start (collision.separated_start) 1e-3 took 22.5 and 21.0 (two
+# seeds) against 25.0 and 23.5 at 1e-2; talos-box-collision 19.5 and 18 either way
+COLLISION_MU_INIT = 1e-3
 
 
 def solve(problem: Problem, x0: np.ndarray | None = None) -> Result:
@@ -190,7 +198,13 @@ def _solve_avoiding(
     Result's iterations and times. Returns the Result and every run so far."""
     runs: list[_Run] = []
     opts = problem.collision_options
-    from .collision import CollisionTerm, box_distances, env_boxes, proxy_model
+    from .collision import (
+        CollisionTerm,
+        box_distances,
+        env_boxes,
+        proxy_model,
+        separated_start,
+    )
 
     robot = problem.robot
     pm = proxy_model(robot)
@@ -221,6 +235,16 @@ def _solve_avoiding(
             d_self = d_self[keep]
         return d_self, np.where(allowed, d_env, np.inf)
 
+    joints0 = None  # the first start: q_init with its pressed self pairs parted
+    if x0 is None and len(cand_self):
+        joints0 = separated_start(
+            robot,
+            pm,
+            np.flatnonzero(keep),
+            opts.margin,
+            problem.q_init,
+            [c.patch.joint_id for c in problem.contacts],
+        )
     base_key = (problem.key(), len(boxes), opts.self_collision, opts.exclude)
     learned_self, learned_env = _LEARNED.get(base_key, (frozenset(), frozenset()))
     margin = opts.margin
@@ -231,8 +255,6 @@ def _solve_avoiding(
     result: Result | None = None
     cold = problem.solver_options
     if cold.mu_init is None:
-        # collision rows start close to active: a smaller initial barrier parameter took
-        # 32 instead of 44 median iterations on talos-near-body-collision (n = 20)
         problem.solver_options = dataclasses.replace(cold, mu_init=COLLISION_MU_INIT)
     cold_run = problem.solver_options
     lam: dict[str, Any] | None = None
@@ -264,7 +286,7 @@ def _solve_avoiding(
                 problem.collision_term = term
                 if lam is None:
                     problem.solver_options = cold_run
-                    run = _run_ipopt(problem, x_warm)
+                    run = _run_ipopt(problem, x_warm, joints0=joints0)
                 else:
                     problem.solver_options = dataclasses.replace(cold_run, warm_start=True)
                     run = _run_ipopt(
