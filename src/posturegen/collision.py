@@ -477,6 +477,36 @@ def separated_start(
     steps towards a target near the body were cut to a few percent by those rows:
     talos-near-body-collision took 26.5 and 24.5 median iterations (two seeds), 25.0 and 23.5
     from the separated start, 22.5 and 21.0 with it and COLLISION_MU_INIT = 1e-3."""
+    key = (
+        id(robot.model),
+        np.asarray(q, dtype=float).tobytes(),
+        margin,
+        tuple(contact_joints),
+        hashlib.sha1(np.asarray(candidates).tobytes()).digest(),
+    )
+    hit = _SEPARATED.get(key)
+    if hit is not None:
+        return hit.copy()
+    out = _separate(robot, pm, candidates, margin, q, contact_joints)
+    if len(_SEPARATED) >= 64:
+        _SEPARATED.clear()
+    _SEPARATED[key] = out
+    return out.copy()
+
+
+# separated starts per (model, q, margin, contacts, candidates): a planner's queries share them
+_SEPARATED: dict[tuple[Any, ...], np.ndarray] = {}
+
+
+def _separate(
+    robot: Robot,
+    pm: ProxyModel,
+    candidates: np.ndarray,
+    margin: float,
+    q: np.ndarray,
+    contact_joints: list[int],
+) -> np.ndarray:
+    """The computation of :func:`separated_start`."""
     model = robot.model
     data = model.createData()
     support: set[int] = set()
@@ -490,13 +520,17 @@ def separated_start(
     q = np.array(q, dtype=float)
     if movable.size == 0 or len(candidates) == 0:
         return q[7:]
-    pairs = pm.self_pairs[candidates]
+    is_candidate = np.zeros(len(pm.self_pairs), dtype=bool)
+    is_candidate[candidates] = True
+    pairs = pm.self_pairs
     for _ in range(3):
         pin.forwardKinematics(model, data, q)
-        pin.computeJointJacobians(model, data, q)
         centers = pm.centers_world(model, data)
-        d = self_distances(pm, centers, pairs)
-        near = np.flatnonzero(d < margin + SEPARATION)
+        d = pm.self_distances_within(model, data, centers, margin + SEPARATION)
+        near = np.flatnonzero(is_candidate & (d < margin + SEPARATION))
+        if near.size == 0:
+            break
+        pin.computeJointJacobians(model, data, q)
         rows, short = [], []
         for k in near:
             i, j = pairs[k]
