@@ -16,8 +16,8 @@ Distances, as smooth CasADi expressions:
   margin + ENV_SATURATION by a smooth minimum (still d >= margin; constant far from the box).
   Hence capsule-box and mesh-box care are avoided.
 
-Self rows are one per pair of links: a smooth minimum (-LSE, SOFT_MIN_BETA) of their sphere
-pairs' distances, computed in the base frame.
+Self rows are one per pair of limbs (the kinematic chains between branchings): a smooth
+minimum (-LSE, SOFT_MIN_BETA) of their sphere pairs' distances, computed in the base frame.
 
 Rows are kept few by an active set: only the pairs closer than ``activation`` at the current
 posture enter the program; after a solve every candidate pair is checked and the violated ones
@@ -150,6 +150,8 @@ class ProxyModel:
     # candidate sphere pairs (i, j), i < j, for self-collision
     self_pairs: np.ndarray  # (n, 2) int
     excluded_joint_pairs: list[tuple[str, str]] = field(default_factory=list)
+    # (njoints,) limb of each joint (see limbs()); None: every joint its own limb
+    limb: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self._joint = np.array([s.joint_id for s in self.spheres], dtype=int)  # (S,)
@@ -353,9 +355,20 @@ def proxy_model(robot: Robot) -> ProxyModel:
     ]
     overlapping |= _meshes_overlapping(robot, data) - disabled
     excluded = sorted((model.names[a], model.names[b]) for a, b in overlapping)
-    pm = ProxyModel(spheres, np.array(pairs, dtype=int).reshape(-1, 2), excluded)
+    pm = ProxyModel(spheres, np.array(pairs, dtype=int).reshape(-1, 2), excluded, limbs(model))
     robot._proxy_model = pm
     return pm
+
+
+def limbs(model: pin.Model) -> np.ndarray:
+    """(njoints,) the limb of each joint: the first joint of its chain below the nearest
+    branching of the kinematic tree (Talos: the pelvis, torso, head, each arm and each leg)."""
+    children = np.bincount(np.asarray(model.parents[1:], dtype=int), minlength=model.njoints)
+    out = np.arange(model.njoints)
+    for j in range(2, model.njoints):
+        parent = int(model.parents[j])
+        out[j] = out[parent] if children[parent] < 2 and parent > 0 else j
+    return out
 
 
 # --------------------------------------------------------------------------- options and boxes
@@ -635,10 +648,19 @@ class CollisionTerm(Term):
             nlp.constrain("collision.env", ca.vertcat(*rows), 0.0, np.inf)
 
     def self_groups(self) -> list[tuple[tuple[int, int], list[tuple[int, int]]]]:
-        """Active sphere pairs grouped by joint pair: one row per pair of links."""
+        """Active sphere pairs grouped by pair of limbs (:func:`limbs`): one row each.
+
+        Rows per pair of limbs rather than per pair of links: fewer rows make IPOPT's linear
+        systems smaller (Talos on talos-near-body-collision: 8 instead of 28 rows, the solve
+        about 12 % faster in generated C), and the smooth minimum carries a hand sliding from
+        one link of a leg to the next; median iterations were 21.5 and 21.0 on two seeds
+        (22.5 and 21.0 per pair of links), mean 24.5 and 22.1 (26.1 and 24.1)."""
+        limb = self.pm.limb
         groups: dict[tuple[int, int], list[tuple[int, int]]] = {}
         for i, j in self.self_pairs:
             a, b = self.pm.spheres[i].joint_id, self.pm.spheres[j].joint_id
+            if limb is not None:
+                a, b = int(limb[a]), int(limb[b])
             groups.setdefault((min(a, b), max(a, b)), []).append((i, j))
         return sorted(groups.items())
 
