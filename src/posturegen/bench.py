@@ -321,6 +321,30 @@ FAMILIES: dict[str, tuple[str, Callable[[int, int], Iterator[Problem]]]] = {
 }
 
 
+# (baseline, variant) family pairs whose ratio a run reports: the same problems without and
+# with collision avoidance (issue goal: median time <= 2x the baseline's)
+COMPARISONS: tuple[tuple[str, str], ...] = (
+    ("talos-near-body-free", "talos-near-body-collision"),
+    ("talos-box-free", "talos-box-collision"),
+)
+
+
+def comparison_lines(reports: list[FamilyReport]) -> list[str]:
+    """One line per pair of COMPARISONS whose two families are in ``reports``: the variant's
+    median IPOPT time, whole-call time and iterations over the baseline's."""
+    by_name = {r.family: r for r in reports}
+    out = []
+    for base, variant in COMPARISONS:
+        if base in by_name and variant in by_name:
+            a, b = by_name[base], by_name[variant]
+            out.append(
+                f"{variant} / {base}: solve {b.median_solve_ms / a.median_solve_ms:.2f}x  "
+                f"call {b.median_call_ms / a.median_call_ms:.2f}x  "
+                f"iterations {b.median_iterations / a.median_iterations:.2f}x"
+            )
+    return out
+
+
 def run_family(name: str, n: int = 100, seed: int = 0, jit: bool = False) -> FamilyReport:
     """Solve n seeded problems of a family and collect statistics. ``jit``: generated C
     (posturegen.codegen, mode ``sync``: a structure's library is loaded from the disk cache or

@@ -215,7 +215,7 @@ def _add_png_option(p: argparse.ArgumentParser) -> None:
 
 def cmd_bench(args: argparse.Namespace) -> int:
     """posturegen bench [--json FILE]"""
-    from .bench import FAMILIES, run_family
+    from .bench import FAMILIES, comparison_lines, run_family
 
     names = args.family or list(FAMILIES)
     for name in names:
@@ -230,6 +230,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
         for failure in rep.failures[:5]:
             print(f"    failed {failure}")
         reports.append(rep)
+    for line in comparison_lines(reports):
+        print(line)
     if args.json:
         from dataclasses import asdict
 
