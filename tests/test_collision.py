@@ -300,14 +300,20 @@ def _configuration(problem, compiled, x):
     return configuration_from_x(problem, compiled, np.asarray(x).ravel())
 
 
+def _random_postures(robot, seed: int, n: int):
+    """n postures with joints drawn uniformly within their limits, ``data`` filled by them."""
+    model, data = robot.model, robot.model.createData()
+    rng = np.random.default_rng(seed)
+    for _ in range(n):
+        q = robot.q_init.copy()
+        q[7:] = rng.uniform(robot.q_lower, robot.q_upper)
+        pin.forwardKinematics(model, data, q)
+        yield model, data
+
+
 def test_vectorized_proxy_centres_match_pinocchio(talos):
     pm = proxy_model(talos)
-    model, data = talos.model, talos.model.createData()
-    rng = np.random.default_rng(3)
-    for _ in range(3):
-        q = talos.q_init.copy()
-        q[7:] = rng.uniform(talos.q_lower, talos.q_upper)
-        pin.forwardKinematics(model, data, q)
+    for model, data in _random_postures(talos, 3, 3):
         expected = np.array([data.oMi[s.joint_id].act(s.center) for s in pm.spheres])
         np.testing.assert_allclose(pm.centers_world(model, data), expected, atol=1e-12)
 
@@ -359,12 +365,7 @@ def test_broad_phase_of_the_self_pairs_keeps_every_close_pair(talos):
     from posturegen.collision import self_distances
 
     pm = proxy_model(talos)
-    model, data = talos.model, talos.model.createData()
-    rng = np.random.default_rng(4)
-    for _ in range(5):
-        q = talos.q_init.copy()
-        q[7:] = rng.uniform(talos.q_lower, talos.q_upper)
-        pin.forwardKinematics(model, data, q)
+    for model, data in _random_postures(talos, 4, 5):
         centers = pm.centers_world(model, data)
         exact = self_distances(pm, centers, pm.self_pairs)
         for within in (0.0, 0.06, 0.3):

@@ -500,26 +500,6 @@ def separated_start(
     hit = _SEPARATED.get(key)
     if hit is not None:
         return hit.copy()
-    out = _separate(robot, pm, candidates, margin, q, contact_joints)
-    if len(_SEPARATED) >= 64:
-        _SEPARATED.clear()
-    _SEPARATED[key] = out
-    return out.copy()
-
-
-# separated starts per (model, q, margin, contacts, candidates): a planner's queries share them
-_SEPARATED: dict[tuple[Any, ...], np.ndarray] = {}
-
-
-def _separate(
-    robot: Robot,
-    pm: ProxyModel,
-    candidates: np.ndarray,
-    margin: float,
-    q: np.ndarray,
-    contact_joints: list[int],
-) -> np.ndarray:
-    """The computation of :func:`separated_start`."""
     model = robot.model
     data = model.createData()
     support: set[int] = set()
@@ -532,7 +512,7 @@ def _separate(
     movable_q = np.array([model.joints[j].idx_q for j in free], dtype=int)
     q = np.array(q, dtype=float)
     if movable.size == 0 or len(candidates) == 0:
-        return q[7:]
+        return q[7:]  # nothing to part: not worth a cache entry
     is_candidate = np.zeros(len(pm.self_pairs), dtype=bool)
     is_candidate[candidates] = True
     pairs = pm.self_pairs
@@ -564,7 +544,14 @@ def _separate(
         step = A.T @ np.linalg.solve(A @ A.T + 1e-4 * np.eye(len(b)), b)
         q[movable_q] += step
         q[7:] = np.clip(q[7:], robot.q_lower, robot.q_upper)
+    if len(_SEPARATED) >= 64:
+        _SEPARATED.clear()
+    _SEPARATED[key] = q[7:].copy()
     return q[7:]
+
+
+# separated starts per (model, q, margin, contacts, candidates): a planner's queries share them
+_SEPARATED: dict[tuple[Any, ...], np.ndarray] = {}
 
 
 # --------------------------------------------------------------------------- the program's rows
