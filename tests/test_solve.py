@@ -224,3 +224,35 @@ def test_a_reference_on_a_limit_no_longer_slows_ipopt_down(monkeypatch):
     names = inset.posture["joint_names"]
     gripper = 7 + names.index("gripper_right_joint")
     assert inset.q[gripper] == pytest.approx(-costs.REFERENCE_INSET, abs=1e-4)
+
+
+def test_a_run_that_does_not_converge_restarts_from_the_torque_relaxed_solution(monkeypatch):
+    """solve(): when IPOPT does not converge, the problem is solved with its torque limits
+    ×TORQUE_CONTINUATION, and the real one again from that solution; every run counts."""
+    import sys
+
+    solve_module = sys.modules["posturegen.solve"]
+    real = solve_module._solve_continued
+    calls: list[tuple[float, bool]] = []
+
+    def first_fails(problem, x0, prior):
+        calls.append((problem.torque_limit_scale, x0 is not None))
+        if len(calls) == 1:  # stop the first solve after 3 iterations: not converged
+            options = problem.solver_options
+            problem.solver_options = dataclasses.replace(options, max_iter=3)
+            try:
+                return real(problem, x0, prior)
+            finally:
+                problem.solver_options = options
+        return real(problem, x0, prior)
+
+    monkeypatch.setattr(solve_module, "_solve_continued", first_fails)
+    problem = problem_from_dict(copy.deepcopy(STAND))
+    result = solve(problem)
+    scale = solve_module.TORQUE_CONTINUATION
+    assert calls == [(1.0, False), (scale, False), (1.0, True)]
+    assert problem.torque_limit_scale == 1.0  # restored
+    assert result.success, result.message
+    assert result.posture["torque_limit_scale"] == 1.0
+    assert result.posture["ipopt_runs"] == 3
+    assert result.iterations > 3
