@@ -9,11 +9,12 @@ every mesh lies in a sphere (tested). They are fitted once per robot and cached 
 Distances, as smooth CasADi expressions:
 
 - sphere-sphere: ``|c_a - c_b| - r_a - r_b`` (smooth wherever the centres differ);
-- sphere-box: a smooth lower bound of the centre's signed distance to the box
-  (:func:`smooth_box_distance`, Euclidean outside, conservative by 1.2-2.3 mm) minus the
-  radius is the distance d, and the row is d saturated at margin + ENV_SATURATION by a smooth
-  minimum (still d >= margin; constant far from the box). Hence capsule-box and mesh-box care
-  are avoided.
+- sphere-box: the six face distances ``s_k = n_k·c - h_k`` of the box give a conservative
+  distance ``max_k s_k <= dist(c, box)``; its smooth lower bound
+  ``LSE_β(s) - log(6)/β <= max_k s_k`` (log-sum-exp, β = 300 /m, so at most 6 mm
+  conservative) minus the radius is the distance d, and the row is d saturated at
+  margin + ENV_SATURATION by a smooth minimum (still d >= margin; constant far from the box).
+  Hence capsule-box and mesh-box care are avoided.
 
 Self rows are one per pair of limbs (the kinematic chains between branchings): a smooth
 minimum (-LSE, SOFT_MIN_BETA) of their sphere pairs' distances, computed in the base frame.
@@ -45,6 +46,7 @@ from .robot import Robot
 from .verify import adjacent_joints
 
 PROXY_VERSION = 5
+BETA = 300.0  # [1/m] sharpness of the smooth max over box faces
 MAX_SPHERES_SOLE = 40
 SOLE_SPHERE_RADIUS = 0.03  # [m] largest proxy radius on a link carrying a sole patch
 # every other link: spheres of at most 10 cm, up to 16 of them (the HRP-2 chest had 5 spheres
@@ -457,10 +459,7 @@ def self_distances(pm: ProxyModel, centers: np.ndarray, pairs: np.ndarray) -> np
 
 
 def box_distances(pm: ProxyModel, centers: np.ndarray, boxes: list[EnvBox]) -> np.ndarray:
-    """(S, B) distances max_k s_k - r of every sphere to every box [m] (s_k the face
-    distances of its centre): a lower bound of the signed distance, so the active set takes a
-    sphere in a little early near edges and corners. (The exact distance here made the
-    HRP-2 ladders take other pairs in at other moments and two of their stages fail.)"""
+    """(S, B) conservative distances max_k s_k - r of every sphere to every box [m]."""
     out = np.empty((len(centers), len(boxes)))
     for k, b in enumerate(boxes):
         local = (centers - b.T_world_box.translation) @ b.T_world_box.rotation
@@ -580,37 +579,6 @@ def _soft_min(values: list[Any]) -> Any:
     return m - ca.log(ca.sum1(ca.exp(-SOFT_MIN_BETA * (v - m)))) / SOFT_MIN_BETA
 
 
-def _softplus(x: Any, beta: float) -> Any:
-    """log(1 + e^(βx))/β: smooth, >= max(x, 0) by at most log(2)/β (written stably)."""
-    return ca.fmax(x, 0) + ca.log1p(ca.exp(-beta * ca.fabs(x))) / beta
-
-
-BOX_BETA = 1000.0  # [1/m] sharpness of smooth_box_distance
-
-
-def smooth_box_distance(local: Any, half: Any) -> Any:
-    """A smooth lower bound of the signed distance [m] of a point (``local`` (3,), in the
-    box frame) to a box of half sizes ``half`` (3,).
-
-    The exact one is |max(q, 0)| + min(max_k q_k, 0) with q = |local| - half. Here
-    max(q_k, 0) becomes softplus_β(q_k) (>= it by at most log(2)/β), min(m, 0) becomes
-    -softplus_β(-m) (<= it) with m = LSE_β(q) - log(3)/β (<= max_k q_k), and
-    sqrt(3)·log(2)/β + 1 µm is subtracted: conservative by 1.2-2.3 mm at β = 1000 /m
-    (tested). Outside the box it is Euclidean, with a curvature of about 1/distance near an
-    edge. The previous row, a smooth maximum of the six face distances, was more conservative
-    near edges and corners (by up to 1 - 1/√3 of the distance) and curved by about β across
-    their diagonal planes: talos-box-collision took 19.5 and 17.5 median iterations (two
-    seeds) with it, 15 and 13 with this one (p90 28 -> 19), and its solve went from 2.3× to
-    2.1× the free problems' in generated C."""
-    b = BOX_BETA
-    q = ca.sqrt(local * local + 1e-12) - half
-    outside = ca.sqrt(ca.sumsqr(_softplus(q, b)) + 1e-12)
-    qmax = ca.mmax(q)
-    lse = qmax + ca.log(ca.sum1(ca.exp(b * (q - qmax)))) / b - np.log(3.0) / b
-    inside = -_softplus(-lse, b)
-    return outside + inside - np.sqrt(3.0) * np.log(2.0) / b - 1e-6
-
-
 def _center(state: Any, sphere: Sphere) -> Any:
     """Symbolic centre (3,) of a proxy sphere in the frame of a kinematic state."""
     return state.p[sphere.joint_id] + state.R[sphere.joint_id] @ sphere.center
@@ -657,7 +625,11 @@ class CollisionTerm(Term):
             rows = []
             for i, k in self.env_pairs:
                 Rb, pb, h = ca.reshape(B[0:9, k], 3, 3), B[9:12, k], B[12:15, k]
-                d = smooth_box_distance(Rb.T @ (c[i] - pb), h) - r[i]
+                local = Rb.T @ (c[i] - pb)
+                s = ca.vertcat(local - h, -local - h)  # six face distances
+                smax = ca.mmax(s)
+                lse = smax + ca.log(ca.sum1(ca.exp(BETA * (s - smax)))) / BETA
+                d = lse - np.log(6.0) / BETA - r[i]
                 # saturated: min(d, margin + ENV_SATURATION), smoothly (see ENV_SATURATION)
                 rows.append(_soft_min([d, margin + ENV_SATURATION]) - margin)
             nlp.constrain("collision.env", ca.vertcat(*rows), 0.0, np.inf)
