@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pinocchio as pin
 import pytest
@@ -32,3 +35,22 @@ def shared_model(urdf: Path) -> pin.Model:
             f"{urdf} missing: tests read the paper's robots from ../shared/robots"
         )
     return pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
+
+
+def first_run_stops_early(real: Callable, calls: list, record: Callable) -> Callable:
+    """A stand-in for one of solve()'s steps ``real(problem, x0, prior)`` whose first call
+    stops IPOPT after 3 iterations (a failure); each call appends ``record(problem, x0,
+    prior)`` to ``calls``."""
+
+    def step(problem: Any, x0: Any, prior: Any) -> Any:
+        calls.append(record(problem, x0, prior))
+        if len(calls) == 1:
+            options = problem.solver_options
+            problem.solver_options = dataclasses.replace(options, max_iter=3)
+            try:
+                return real(problem, x0, prior)
+            finally:
+                problem.solver_options = options
+        return real(problem, x0, prior)
+
+    return step

@@ -4,7 +4,6 @@ gradients, and postures that collide without the rows do not with them (coal on 
 from __future__ import annotations
 
 import copy
-import dataclasses
 
 import casadi as ca
 import numpy as np
@@ -25,7 +24,7 @@ from posturegen.collision import (
 from posturegen.errors import InputError
 from posturegen.robot import load_robot
 from posturegen.verify import mesh_collision_checks
-from tests.conftest import ATLAS_URDF, HRP2_URDF
+from tests.conftest import ATLAS_URDF, HRP2_URDF, first_run_stops_early
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
 ROBOTS = {
@@ -202,21 +201,11 @@ def test_a_failed_active_set_loop_restarts_from_the_collision_free_solution(monk
     import sys
 
     solve_module = sys.modules["posturegen.solve"]
-    real = solve_module._solve_avoiding
     calls: list[tuple] = []
-
-    def first_fails(problem, x0, prior):
-        calls.append((x0, len(prior)))
-        if len(calls) == 1:  # stop the first loop after 3 iterations: a failure
-            options = problem.solver_options
-            problem.solver_options = dataclasses.replace(options, max_iter=3)
-            try:
-                return real(problem, x0, prior)
-            finally:
-                problem.solver_options = options
-        return real(problem, x0, prior)
-
-    monkeypatch.setattr(solve_module, "_solve_avoiding", first_fails)
+    step = first_run_stops_early(
+        solve_module._solve_avoiding, calls, lambda _, x0, prior: (x0, len(prior))
+    )
+    monkeypatch.setattr(solve_module, "_solve_avoiding", step)
     data = copy.deepcopy(STAND)
     data["tasks"][0]["target"] = [0.15, 0.0, 0.95]  # crosses the body without the rows
     data["options"]["self_collision"] = True

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from posturegen import load_problem, problem_from_dict, solve
 from posturegen.cli import _demo_dir, main
 from posturegen.verify import verify_posture
-from tests.conftest import HRP2_URDF
+from tests.conftest import HRP2_URDF, first_run_stops_early
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
 
@@ -232,21 +232,13 @@ def test_a_run_that_does_not_converge_restarts_from_the_torque_relaxed_solution(
     import sys
 
     solve_module = sys.modules["posturegen.solve"]
-    real = solve_module._solve_continued
     calls: list[tuple[float, bool]] = []
-
-    def first_fails(problem, x0, prior):
-        calls.append((problem.torque_limit_scale, x0 is not None))
-        if len(calls) == 1:  # stop the first solve after 3 iterations: not converged
-            options = problem.solver_options
-            problem.solver_options = dataclasses.replace(options, max_iter=3)
-            try:
-                return real(problem, x0, prior)
-            finally:
-                problem.solver_options = options
-        return real(problem, x0, prior)
-
-    monkeypatch.setattr(solve_module, "_solve_continued", first_fails)
+    step = first_run_stops_early(
+        solve_module._solve_continued,
+        calls,
+        lambda p, x0, _: (p.torque_limit_scale, x0 is not None),
+    )
+    monkeypatch.setattr(solve_module, "_solve_continued", step)
     problem = problem_from_dict(copy.deepcopy(STAND))
     result = solve(problem)
     scale = solve_module.TORQUE_CONTINUATION
