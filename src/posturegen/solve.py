@@ -160,9 +160,10 @@ COLLISION_MU_INIT = 1e-3
 
 # Torque continuation: a program that IPOPT found locally infeasible is solved with its torque
 # limits ×TORQUE_CONTINUATION, and the real one again from that solution. Talos' inclined
-# ladder, stage 'left foot on step 2', from the previous stage's posture: infeasible after
-# 246 iterations (the knee needed 1.14× its limit there); with the limits ×2, 41 iterations,
-# then 29 from that posture: verified.
+# ladder, stage 'left foot on step 2', with a Euclidean sphere-box distance that was tried
+# (commit 54894ca): from the previous stage's posture, infeasible after 246 iterations (the
+# knee needed 1.14× its limit there); with the limits ×2, 41 iterations, then 29 from that
+# posture: verified.
 TORQUE_CONTINUATION = 2.0
 
 
