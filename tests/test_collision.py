@@ -358,7 +358,7 @@ def test_broad_phase_of_the_self_pairs_keeps_every_close_pair(talos):
         centers = pm.centers_world(model, data)
         exact = self_distances(pm, centers, pm.self_pairs)
         for within in (0.0, 0.06, 0.3):
-            d = pm.self_distances_within(model, data, centers, within)
+            d = pm.self_distances_within(centers, within)
             computed = np.isfinite(d)
             np.testing.assert_allclose(d[computed], exact[computed], atol=1e-12)
             assert np.all(exact[~computed] >= within)

@@ -246,7 +246,7 @@ def _solve_avoiding(
     # candidate self pairs: a mask over pm.self_pairs (the user's exclusions removed)
     keep = np.full(len(pm.self_pairs), opts.self_collision, dtype=bool)
     if opts.self_collision and excluded:
-        jid = np.array([s.joint_id for s in pm.spheres])
+        jid = pm.joint_ids
         keep &= [
             (min(jid[i], jid[j]), max(jid[i], jid[j])) not in excluded for i, j in pm.self_pairs
         ]
@@ -264,7 +264,7 @@ def _solve_avoiding(
         d_env = box_distances(pm, centers, boxes) if boxes else np.zeros((len(centers), 0))
         d_self = np.zeros(0)
         if len(cand_self):
-            d_self = pm.self_distances_within(model, data, centers, margin + opts.activation)
+            d_self = pm.self_distances_within(centers, margin + opts.activation)
             d_self = d_self[keep]
         return d_self, np.where(allowed, d_env, np.inf)
 
