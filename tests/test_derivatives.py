@@ -97,3 +97,23 @@ def test_lagrangian_hessian(program):
     H = np.array(hess_fn(x))
     H_fd = _fd_jacobian(lambda xv: np.array(grad_fn(xv)).ravel(), x, h=1e-5)
     np.testing.assert_allclose(H, H_fd, atol=1e-4 * max(1.0, np.abs(H).max()))
+
+
+def test_block_derivatives_are_checked_when_declared():
+    """A block's own derivatives must have its shape and be taken w.r.t. variables."""
+    from posturegen.errors import SolveError
+    from posturegen.problem import NLP, BlockDerivatives, _columns
+
+    nlp = NLP()
+    x = nlp.variable("x", 3)
+    lam = ca.SX.sym("lam", 2)
+    good = BlockDerivatives(z=x[0:2], jacobian=ca.SX(2, 2), lam=lam, hessian=ca.SX(2, 2))
+    nlp.constrain("ok", ca.vertcat(x[0] ** 2, x[1]), 0, 1, good)
+    assert _columns(x[[2, 0]], x) == [2, 0]
+    wrong = BlockDerivatives(z=x, jacobian=ca.SX(2, 2), lam=lam, hessian=ca.SX(3, 3))
+    with pytest.raises(SolveError, match="Jacobian of the wrong shape"):
+        nlp.constrain("wrong", ca.vertcat(x[0], x[1]), 0, 1, wrong)
+    with pytest.raises(SolveError, match="variables of the program"):
+        _columns(2 * x[0:1], x)
+    with pytest.raises(SolveError, match="not variables"):
+        _columns(ca.SX.sym("other", 1), x)

@@ -125,3 +125,32 @@ def test_unsupported_joint_type_is_a_clear_model_error():
     model.addJoint(ff, pin.JointModelSpherical(), pin.SE3.Identity(), "ball")
     with pytest.raises(ModelError, match="ball"):
         CasadiKinematics(model)
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_twist_jacobians_are_the_derivatives_of_the_placements(name):
+    """[∂p_i/∂z; ω_i] with ω_i = vee(∂R_i/∂z_m R_iᵀ), z = (p, w, qj) or qj, to 1e-9."""
+    model = MODELS[name]
+    kin = CasadiKinematics(model)
+    p, w, qj = ca.SX.sym("p", 3), ca.SX.sym("w", 3), ca.SX.sym("qj", kin.nj)
+    R0 = ca.DM(pin.utils.rpyToMatrix(0.3, -0.2, 1.1))
+    world = kin.forward(p, R0 @ so3_exp(w), qj)
+    local = kin.forward(ca.SX.zeros(3), ca.SX.eye(3), qj)
+    joints = list(range(1, model.njoints))
+    rng = np.random.default_rng(7)
+    for state, z, base in ((world, ca.vertcat(p, w, qj), w), (local, qj, None)):
+        J = kin.twist_jacobians(state, joints, base)
+        outs = []
+        for i in joints:
+            dR = ca.jacobian(ca.vec(state.R[i]), z)
+            omega = []
+            for m in range(z.shape[0]):
+                S = ca.reshape(dR[:, m], 3, 3) @ state.R[i].T
+                omega.append(ca.vertcat(S[2, 1], S[0, 2], S[1, 0]))
+            outs += [J[i], ca.vertcat(ca.jacobian(state.p[i], z), ca.horzcat(*omega))]
+        fn = ca.Function("twists", [z], outs)
+        for _ in range(3):
+            zv = rng.uniform(-1.0, 1.0, z.shape[0])
+            out = [np.array(v) for v in fn(zv)]
+            for mine, reference in zip(out[0::2], out[1::2], strict=True):
+                np.testing.assert_allclose(mine, reference, atol=TOL)

@@ -85,14 +85,16 @@ def resolve_mode(option: str | None) -> str:
     return mode
 
 
-def library_key(nlp: ca.Function) -> str:
-    """SHA-256 (20 hex digits) of the program (x, p) -> (f, g), the CasADi version, the machine
-    and the compiler flags."""
+def library_key(nlp: ca.Function, *derivatives: ca.Function) -> str:
+    """SHA-256 (20 hex digits) of the program (x, p) -> (f, g), its hand-built derivative
+    functions if any (posturegen.problem.BlockDerivatives), the CasADi version, the machine and
+    the compiler flags."""
     h = hashlib.sha256()
     h.update(
         repr((CODEGEN_VERSION, ca.__version__, platform.machine(), HOT_FLAGS, COLD_FLAGS)).encode()
     )
-    h.update(nlp.serialize().encode())
+    for fn in (nlp, *derivatives):
+        h.update(fn.serialize().encode())
     return h.hexdigest()[:20]
 
 

@@ -36,7 +36,7 @@ class ConfigurationTerm(Term):
         qj = nlp.variable("joints", robot.nj, robot.q_lower, robot.q_upper)
         R0 = ca.reshape(nlp.parameter("base.R0", 9), 3, 3)
         ctx.state = ctx.kin.forward(p, base_rotation(R0, w), qj)
-        ctx.base_position, ctx.joints = p, qj
+        ctx.base_position, ctx.base_rotation, ctx.joints = p, w, qj
 
     def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
         R0 = pin.Quaternion(problem.q_init[3:7]).normalized().matrix()

@@ -12,6 +12,7 @@ The static terms use subtree sums instead of Jacobians: for a revolute joint j w
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -25,6 +26,22 @@ Expr = ca.SX | ca.MX | ca.DM
 
 _REVOLUTE = {"JointModelRX": 0, "JointModelRY": 1, "JointModelRZ": 2}
 _PRISMATIC = {"JointModelPX": 0, "JointModelPY": 1, "JointModelPZ": 2}
+
+
+_SCRATCH = threading.local()
+
+
+def scratch_data(model: pin.Model) -> pin.Data:
+    """A ``pin.Data`` of ``model`` that this thread's numeric checks reuse (``createData``
+    takes 0.3 ms on Talos, three times per collision-avoiding solve); every user runs
+    ``forwardKinematics`` before reading it."""
+    cache = getattr(_SCRATCH, "data", None)
+    if cache is None:
+        cache = _SCRATCH.data = {}
+    entry = cache.get(id(model))
+    if entry is None or entry[0] is not model:  # the model is held: its id stays its own
+        entry = cache[id(model)] = (model, model.createData())
+    return entry[1]
 
 
 def skew(v: Expr) -> Expr:
@@ -245,6 +262,51 @@ class CasadiKinematics:
             else:
                 J[0:3, col] = a
         return J
+
+    def twist_jacobians(
+        self, state: KinematicState, joint_ids: Sequence[int], base_rotation: Expr | None = None
+    ) -> dict[int, Expr]:
+        """6×nz Jacobians ``[∂p_i/∂z; ω_i]`` of joint frames i w.r.t. coordinates z, rows
+        ω_i the frame's angular velocity per unit ż, both in the state's frame. A point
+        c = p_i + R_i s then has ∂c/∂z = [I, -[R_i s]×] J_i.
+
+        With ``base_rotation`` (3,), the variable w of R_base = R0·exp([w]×) in ``state``, z is
+        (p_base (3,), w (3,), qj (nj,)); without it the state's base is fixed and z = qj. The
+        columns of qj are the geometric ones (revolute: ``[a_k × (p_i - o_k); a_k]``); those of
+        w have ω = vee(∂R_base/∂w_m · R_baseᵀ), the same for every frame."""
+        nb = 6 if base_rotation is not None else 0
+        out: dict[int, Expr] = {}
+        omega_w = None
+        if base_rotation is not None:
+            Rb = state.R[1]
+            dRb = ca.jacobian(ca.vec(Rb), base_rotation)  # (9, 3)
+            cols = []
+            for m in range(3):
+                S = ca.reshape(dRb[:, m], 3, 3) @ Rb.T
+                cols.append(ca.vertcat(S[2, 1], S[0, 2], S[1, 0]))
+            omega_w = ca.horzcat(*cols)  # (3, 3)
+        for i in joint_ids:
+            J = ca.SX(6, nb + self.nj)
+            if base_rotation is not None:
+                J[0:3, 0:3] = self._joints[1].R_parent_joint
+                r = state.p[i] - state.p[1]
+                for m in range(3):
+                    J[0:3, 3 + m] = ca.cross(omega_w[:, m], r)
+                J[3:6, 3:6] = omega_w
+            for k in self.model.supports[i]:
+                k = int(k)
+                if k < 2:
+                    continue
+                info = self._joints[k]
+                a = state.R[k] @ info.axis
+                col = nb + info.idx_j
+                if info.kind == "revolute":
+                    J[0:3, col] = ca.cross(a, state.p[i] - state.p[k])
+                    J[3:6, col] = a
+                else:
+                    J[0:3, col] = a
+            out[i] = J
+        return out
 
     # ------------------------------------------------------------------ statics
     def com_world(self, state: KinematicState) -> Expr:

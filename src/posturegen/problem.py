@@ -25,6 +25,19 @@ from .scene import Scene
 ArrayLike = np.ndarray | float
 
 
+@dataclass(frozen=True)
+class BlockDerivatives:
+    """Hand-built derivatives of a constraint block g_b that depends on the variables only
+    through z (nz,), a vector of them: ``jacobian`` (rows, nz) = ∂g_b/∂z and ``hessian``
+    (nz, nz) = ∇²_z(λᵀg_b) as an expression of the symbols ``lam`` (rows,). The program uses
+    them in place of CasADi's automatic derivatives of the block (tested equal to them)."""
+
+    z: ca.SX
+    jacobian: ca.SX
+    lam: ca.SX
+    hessian: ca.SX
+
+
 class NLP:
     """Symbolic pieces of one program: x (variables), p (parameters), g (constraints), cost."""
 
@@ -32,6 +45,7 @@ class NLP:
         self.x: dict[str, tuple[ca.SX, np.ndarray, np.ndarray]] = {}
         self.p: dict[str, ca.SX] = {}
         self.g: dict[str, tuple[ca.SX, np.ndarray, np.ndarray]] = {}
+        self.derivatives: dict[str, BlockDerivatives] = {}
         self.costs: dict[str, ca.SX] = {}
         self.outputs: dict[str, ca.SX] = {}
 
@@ -54,12 +68,24 @@ class NLP:
         self.p[name] = ca.SX.sym(name, n)
         return self.p[name]
 
-    def constrain(self, name: str, expr: ca.SX, lb: ArrayLike, ub: ArrayLike) -> None:
-        """lb <= expr <= ub (use lb == ub for equalities)."""
+    def constrain(
+        self,
+        name: str,
+        expr: ca.SX,
+        lb: ArrayLike,
+        ub: ArrayLike,
+        derivatives: BlockDerivatives | None = None,
+    ) -> None:
+        """lb <= expr <= ub (use lb == ub for equalities); ``derivatives``: the block's own
+        Jacobian and Hessian (see :class:`BlockDerivatives`)."""
         if name in self.g:
             raise SolveError(f"constraint block '{name}' declared twice")
         expr = ca.vec(ca.SX(expr))
         n = expr.shape[0]
+        if derivatives is not None:
+            if derivatives.jacobian.shape != (n, derivatives.z.shape[0]):
+                raise SolveError(f"constraint block '{name}': Jacobian of the wrong shape")
+            self.derivatives[name] = derivatives
         self.g[name] = (
             expr,
             np.broadcast_to(lb, (n,)).astype(float),
@@ -84,6 +110,7 @@ class BuildContext:
     kin: CasadiKinematics
     state: KinematicState | None = None
     base_position: ca.SX | None = None  # (3,)
+    base_rotation: ca.SX | None = None  # (3,) w of R_base = R0·exp([w]×)
     joints: ca.SX | None = None  # (nj,)
     # (joint id, world point (3,), world force on the robot (3,)) of every force-bearing point
     force_points: list[tuple[int, ca.SX, ca.SX]] = field(default_factory=list)
@@ -254,6 +281,8 @@ class _Program(_Layout):
     g: ca.SX
     function: ca.Function  # (x, p) -> (f, g)
     outputs: ca.Function  # (x, p) -> outputs and cost terms
+    # nlpsol's "jac_g" and "hess_lag" when some block has hand-built derivatives, else empty
+    derivative_functions: dict[str, ca.Function] = field(default_factory=dict)
 
 
 _CACHE: collections.OrderedDict[tuple[Any, ...], CompiledNLP] = collections.OrderedDict()
@@ -315,13 +344,20 @@ class Problem:
         prog = self._program()
         opts = self.solver_options.ipopt()
         mode = self.solver_options.codegen_mode()
-        lib_key = codegen.library_key(prog.function) if mode != "off" else None
+        lib_key = (
+            codegen.library_key(prog.function, *prog.derivative_functions.values())
+            if mode != "off"
+            else None
+        )
         # the structure's library from the disk cache: no SX derivatives to build
         solver = codegen.load(lib_key, opts) if lib_key is not None else None
         library = solver is not None
         if solver is None:
             solver = ca.nlpsol(
-                "posture", "ipopt", {"x": prog.x, "p": prog.p, "f": prog.f, "g": prog.g}, opts
+                "posture",
+                "ipopt",
+                {"x": prog.x, "p": prog.p, "f": prog.f, "g": prog.g},
+                {**opts, **prog.derivative_functions},
             )
             if mode == "sync" and lib_key is not None:
                 codegen.build(lib_key, solver, prog.function)
@@ -381,6 +417,9 @@ class Problem:
             ubx=np.concatenate([v[2] for v in nlp.x.values()]),
             lbg=np.concatenate([v[1] for v in nlp.g.values()]),
             ubg=np.concatenate([v[2] for v in nlp.g.values()]),
+            derivative_functions=_derivative_functions(nlp, x, p, cost, g)
+            if nlp.derivatives
+            else {},
         )
         _PROGRAMS[key] = prog
         while len(_PROGRAMS) > _CACHE_SIZE:
@@ -421,6 +460,52 @@ class Problem:
         """Rows per constraint block."""
         c = self.compile()
         return {n: s.stop - s.start for n, s in c.g_index.items()}
+
+
+def _derivative_functions(
+    nlp: NLP, x: ca.SX, p: ca.SX, cost: ca.SX, g: ca.SX
+) -> dict[str, ca.Function]:
+    """nlpsol's ``jac_g`` and ``hess_lag`` for a program with hand-built block derivatives:
+    CasADi's automatic derivatives of every other block (one Jacobian and one Hessian, so that
+    they share their subexpressions) plus each block's own, placed at the columns of its z."""
+    lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", g.shape[0])
+    index = _layout(nlp.g, lambda v: v[0].shape[0])
+    own = [np.arange(index[n].start, index[n].stop) for n in nlp.derivatives]
+    rest = np.setdiff1d(np.arange(g.shape[0]), np.concatenate(own)).tolist()
+    jac_rest = ca.jacobian(g[rest], x)
+    H = ca.hessian(lam_f * cost + ca.dot(lam_g[rest], g[rest]), x)[0]
+    rows: dict[int, ca.SX] = {int(r): jac_rest[k, :] for k, r in enumerate(rest)}
+    for name, d in nlp.derivatives.items():
+        sl = index[name]
+        cols = _columns(d.z, x)
+        J = ca.SX(sl.stop - sl.start, x.shape[0])
+        J[:, cols] = d.jacobian
+        for k in range(sl.stop - sl.start):
+            rows[sl.start + k] = J[k, :]
+        Hb = ca.SX(x.shape[0], x.shape[0])
+        Hb[cols, cols] = ca.substitute(d.hessian, d.lam, lam_g[sl])
+        H = H + Hb
+    jac = ca.vertcat(*[rows[r] for r in range(g.shape[0])])
+    return {
+        "jac_g": ca.Function("nlp_jac_g", [x, p], [g, jac], ["x", "p"], ["g", "jac_g_x"]),
+        "hess_lag": ca.Function(
+            "nlp_hess_l",
+            [x, p, lam_f, lam_g],
+            [ca.triu(H)],
+            ["x", "p", "lam_f", "lam_g"],
+            ["triu_hess_gamma_x_x"],
+        ),
+    }
+
+
+def _columns(z: ca.SX, x: ca.SX) -> list[int]:
+    """Where each symbol of z sits in x (∂z/∂x is a selection matrix)."""
+    if not all(z[k].is_symbolic() for k in range(z.shape[0])):
+        raise SolveError("a block's derivatives must be taken w.r.t. variables of the program")
+    rows, cols = ca.jacobian(z, x).sparsity().get_triplet()
+    if sorted(rows) != list(range(z.shape[0])):
+        raise SolveError("a block's derivatives are taken w.r.t. symbols that are not variables")
+    return [c for _, c in sorted(zip(rows, cols, strict=True))]
 
 
 def base_rotation(R0: ca.SX, w: ca.SX) -> ca.SX:

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from .kinematics import scratch_data
 from .problem import _CACHE, Problem
 from .verify import SCHEMA, VerifyReport, verify_posture
 
@@ -254,7 +255,7 @@ def _solve_avoiding(
     allowed = np.array(
         [[s.joint_id not in b.allowed_joints for b in boxes] for s in pm.spheres], dtype=bool
     ).reshape(len(pm.spheres), len(boxes))
-    model, data = robot.model, robot.model.createData()
+    model, data = robot.model, scratch_data(robot.model)
 
     def distances(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Candidate self and sphere-box distances at q; +inf where they cannot be below

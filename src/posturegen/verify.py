@@ -26,6 +26,7 @@ import pinocchio as pin
 
 from .errors import InputError
 from .geometry import ConvexPolygon, Ellipse
+from .kinematics import scratch_data
 
 SCHEMA = "posturegen.posture/1"
 SEQUENCE_SCHEMA = "posturegen.sequence/1"  # climbs: see posturegen.sequence
@@ -95,7 +96,7 @@ def verify_posture(
     """Check a posture dict (posture-file content) against a Pinocchio model; with a
     ``collision`` entry, also on the real collision meshes (``geometry``, loaded from the
     posture's URDF when not given)."""
-    data = model.createData()
+    data = scratch_data(model)
     checks: list[Check] = []
     q = np.asarray(posture["q"], dtype=float)
     if q.shape != (model.nq,) or not np.all(np.isfinite(q)):
@@ -298,7 +299,7 @@ def mesh_collision_checks(
     SRDF's disabled ones, same or parent-child joints and the posture's exclusions), and no
     mesh more than TOL_PENETRATION inside a box (each box shrunk by it, then tested)."""
     col = posture["collision"]
-    data = model.createData()
+    data = scratch_data(model)
     pin.forwardKinematics(model, data, q)
     gdata = geometry.createData()
     pin.updateGeometryPlacements(model, data, geometry, gdata)
