@@ -68,3 +68,30 @@ def test_compared_families_are_the_same_problems(pair):
             or not dataclasses.asdict(a.collision_options)["self_collision"]
         )
         assert b.collision_options is not None
+
+
+def test_compared_families_run_interleaved(monkeypatch):
+    """Problem i of the baseline, then problem i of the variant; other families alone."""
+    from posturegen import bench
+
+    order = []
+    step = bench._FamilyRun.step
+
+    def recording(self, i):
+        order.append((self.name, i))
+        step(self, i)
+
+    monkeypatch.setattr(bench._FamilyRun, "step", recording)
+    seen = []
+    names = ["talos-box-collision", "talos-stand-reach", "talos-box-free"]
+    reports = bench.run_families(names, n=2, done=lambda r: seen.append(r.family))
+    assert [r.family for r in reports] == names
+    assert sorted(seen) == sorted(names)
+    assert order == [
+        ("talos-box-free", 0),
+        ("talos-box-collision", 0),
+        ("talos-box-free", 1),
+        ("talos-box-collision", 1),
+        ("talos-stand-reach", 0),
+        ("talos-stand-reach", 1),
+    ]

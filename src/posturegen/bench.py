@@ -345,59 +345,122 @@ def comparison_lines(reports: list[FamilyReport]) -> list[str]:
     return out
 
 
+class _FamilyRun:
+    """The seeded problems of one family, warmed up, solved one at a time (:meth:`step`) so
+    that two families can be interleaved; :meth:`report` collects the statistics."""
+
+    def __init__(self, name: str, n: int, seed: int, jit: bool) -> None:
+        from . import codegen
+
+        self.name, self.n = name, n
+        self.description, generator = FAMILIES[name]
+        self.problems = list(generator(n + 1, seed))
+        for problem in self.problems:
+            problem.solver_options = dataclasses.replace(
+                problem.solver_options, codegen="sync" if jit else "off"
+            )
+        self.builds_before = len(codegen.BUILDS)
+        solve(self.problems[0])  # warm-up: builds the solver for this structure
+        self.compiled = self.problems[0].compile()
+        self.times: list[float] = []
+        self.calls: list[float] = []
+        self.iters: list[int] = []
+        self.rows: list[int] = []
+        self.failures: list[str] = []
+        self.ok = self.c_solves = 0
+
+    def step(self, i: int) -> None:
+        """Solve problem i (0-based, after the warm-up) and record it."""
+        problem = self.problems[i + 1]
+        t0 = time.perf_counter()
+        result = solve(problem)
+        self.calls.append(time.perf_counter() - t0)
+        self.rows.append(problem.compile().n_g)  # the last run's structure (collision rows vary)
+        self.c_solves += problem.compile().library
+        self.times.append(result.solve_time_s)
+        self.iters.append(result.iterations)
+        if result.success:
+            self.ok += 1
+        else:
+            self.failures.append(f"#{i}: {result.message}")
+
+    def report(self) -> FamilyReport:
+        from . import codegen
+
+        ms = [1e3 * t for t in self.times]
+        compiled = self.compiled
+        return FamilyReport(
+            family=self.name,
+            description=self.description,
+            n=self.n,
+            successes=self.ok,
+            success_rate=self.ok / self.n,
+            median_solve_ms=statistics.median(ms),
+            min_solve_ms=min(ms),
+            max_solve_ms=max(ms),
+            median_call_ms=1e3 * statistics.median(self.calls),
+            median_iterations=statistics.median(self.iters),
+            variables=compiled.n_x,
+            constraints=int(statistics.median(self.rows)),
+            contact_rows=sum(
+                s.stop - s.start
+                for name, s in compiled.g_index.items()
+                if name.startswith("contact.") and not name.endswith(".friction")
+            ),
+            failures=tuple(self.failures),
+            c_builds=len(codegen.BUILDS) - self.builds_before,
+            c_build_s=sum(b.compile_s for b in codegen.BUILDS[self.builds_before :]),
+            c_solves=self.c_solves,
+        )
+
+
 def run_family(name: str, n: int = 100, seed: int = 0, jit: bool = False) -> FamilyReport:
     """Solve n seeded problems of a family and collect statistics. ``jit``: generated C
     (posturegen.codegen, mode ``sync``: a structure's library is loaded from the disk cache or
     compiled before its first solve); else CasADi's virtual machine (mode ``off``), so that
     the numbers do not depend on when a background build ends."""
-    from . import codegen
+    family = _FamilyRun(name, n, seed, jit)
+    for i in range(n):
+        family.step(i)
+    return family.report()
 
-    description, generator = FAMILIES[name]
-    problems = list(generator(n + 1, seed))
-    for problem in problems:
-        problem.solver_options = dataclasses.replace(
-            problem.solver_options, codegen="sync" if jit else "off"
-        )
-    builds_before = len(codegen.BUILDS)
-    solve(problems[0])  # warm-up: builds the solver for this structure
-    compiled = problems[0].compile()
-    times, calls, iters, ok, failures, rows, c_solves = [], [], [], 0, [], [], 0
-    for i, problem in enumerate(problems[1:]):
-        t0 = time.perf_counter()
-        result = solve(problem)
-        calls.append(time.perf_counter() - t0)
-        rows.append(problem.compile().n_g)  # the last run's structure (collision rows vary)
-        c_solves += problem.compile().library
-        times.append(result.solve_time_s)
-        iters.append(result.iterations)
-        if result.success:
-            ok += 1
+
+def run_families(
+    names: list[str],
+    n: int = 100,
+    seed: int = 0,
+    jit: bool = False,
+    done: Callable[[FamilyReport], None] | None = None,
+) -> list[FamilyReport]:
+    """Reports of ``names`` in order (``done`` is called with each as it is ready). The two
+    families of a pair of COMPARISONS, when both are asked for, are solved interleaved
+    (problem i of the baseline, then problem i of the variant), so that the machine's slow and
+    fast spells fall on both and their ratio is measured on the same stretch of time (on the
+    2-core virtual machine the medians of one family moved by up to 40 % between runs, and
+    the ratio of two separate runs by 0.5)."""
+    reports: dict[str, FamilyReport] = {}
+    paired = {
+        name: (base, variant)
+        for base, variant in COMPARISONS
+        if base in names and variant in names
+        for name in (base, variant)
+    }
+    for name in names:
+        if name in reports:
+            continue
+        if name in paired:
+            runs = [_FamilyRun(member, n, seed, jit) for member in paired[name]]
+            for i in range(n):
+                for family in runs:
+                    family.step(i)
+            ready = [family.report() for family in runs]
         else:
-            failures.append(f"#{i}: {result.message}")
-    ms = [1e3 * t for t in times]
-    return FamilyReport(
-        family=name,
-        description=description,
-        n=n,
-        successes=ok,
-        success_rate=ok / n,
-        median_solve_ms=statistics.median(ms),
-        min_solve_ms=min(ms),
-        max_solve_ms=max(ms),
-        median_call_ms=1e3 * statistics.median(calls),
-        median_iterations=statistics.median(iters),
-        variables=compiled.n_x,
-        constraints=int(statistics.median(rows)),
-        contact_rows=sum(
-            s.stop - s.start
-            for name, s in compiled.g_index.items()
-            if name.startswith("contact.") and not name.endswith(".friction")
-        ),
-        failures=tuple(failures),
-        c_builds=len(codegen.BUILDS) - builds_before,
-        c_build_s=sum(b.compile_s for b in codegen.BUILDS[builds_before:]),
-        c_solves=c_solves,
-    )
+            ready = [run_family(name, n, seed, jit)]
+        for rep in ready:
+            reports[rep.family] = rep
+            if done is not None:
+                done(rep)
+    return [reports[name] for name in names]
 
 
 def run(
@@ -405,4 +468,4 @@ def run(
 ) -> list[dict[str, Any]]:
     """Run families (all by default); return their reports as dicts."""
     names = families or list(FAMILIES)
-    return [asdict(run_family(name, n, seed, jit)) for name in names]
+    return [asdict(r) for r in run_families(names, n, seed, jit)]

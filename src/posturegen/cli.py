@@ -215,7 +215,7 @@ def _add_png_option(p: argparse.ArgumentParser) -> None:
 
 def cmd_bench(args: argparse.Namespace) -> int:
     """posturegen bench [--json FILE]"""
-    from .bench import FAMILIES, comparison_lines, run_family
+    from .bench import FAMILIES, FamilyReport, comparison_lines, run_families
 
     names = args.family or list(FAMILIES)
     for name in names:
@@ -223,13 +223,13 @@ def cmd_bench(args: argparse.Namespace) -> int:
             raise PosturegenError(
                 f"--family: unknown family '{name}' (known: {', '.join(FAMILIES)})"
             )
-    reports = []
-    for name in names:
-        rep = run_family(name, args.n, args.seed, args.jit)
+
+    def show(rep: FamilyReport) -> None:
         print(rep.line(), flush=True)
         for failure in rep.failures[:5]:
             print(f"    failed {failure}")
-        reports.append(rep)
+
+    reports = run_families(names, args.n, args.seed, args.jit, done=show)
     for line in comparison_lines(reports):
         print(line)
     if args.json:
