@@ -446,3 +446,31 @@ def test_the_separated_start_parts_pressed_pairs_and_keeps_the_supports(talos):
     assert after[arms].min() >= margin + 0.8 * SEPARATION  # parted
     # pairs the free joints cannot move (the two legs) keep their distance
     np.testing.assert_allclose(after[~arms].min(), before[~arms].min(), atol=1e-9)
+
+
+def test_collision_runs_start_ipopt_with_their_barrier_and_regularization(monkeypatch):
+    """The active-set runs use COLLISION_MU_INIT and COLLISION_PERTURBATION (IPOPT's options
+    carry them), the problem's own options are restored afterwards."""
+    import sys
+
+    solve_module = sys.modules["posturegen.solve"]
+    seen = []
+    run = solve_module._run_ipopt
+
+    def spy(problem, *args, **kwargs):
+        seen.append(problem.solver_options.ipopt())
+        return run(problem, *args, **kwargs)
+
+    monkeypatch.setattr(solve_module, "_run_ipopt", spy)
+    data = copy.deepcopy(STAND)
+    data["options"]["self_collision"] = True
+    problem = problem_from_dict(data)
+    before = problem.solver_options
+    assert "ipopt.first_hessian_perturbation" not in before.ipopt()
+    result = solve(problem)
+    assert result.success, result.message
+    first, factor = solve_module.COLLISION_PERTURBATION
+    assert seen[0]["ipopt.mu_init"] == solve_module.COLLISION_MU_INIT
+    assert seen[0]["ipopt.first_hessian_perturbation"] == first
+    assert seen[0]["ipopt.perturb_inc_fact_first"] == factor
+    assert problem.solver_options == before

@@ -164,6 +164,10 @@ class SolverOptions:
     # IPOPT's initial barrier parameter and strategy (None: monotone from IPOPT's 0.1)
     mu_init: float | None = None
     mu_strategy: str = "monotone"
+    # IPOPT's first Hessian regularization δ and its growth factor while the KKT matrix's
+    # inertia is wrong (None: IPOPT's 1e-4 and 100)
+    first_hessian_perturbation: float | None = None
+    perturb_inc_fact_first: float | None = None
 
     def ipopt(self) -> dict[str, Any]:
         """The options dict passed to casadi.nlpsol."""
@@ -182,6 +186,10 @@ class SolverOptions:
         }
         if self.mu_init is not None:
             opts["ipopt.mu_init"] = self.mu_init
+        if self.first_hessian_perturbation is not None:
+            opts["ipopt.first_hessian_perturbation"] = self.first_hessian_perturbation
+        if self.perturb_inc_fact_first is not None:
+            opts["ipopt.perturb_inc_fact_first"] = self.perturb_inc_fact_first
         if self.warm_start:
             opts.update(
                 {

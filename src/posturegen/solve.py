@@ -157,6 +157,10 @@ _LEARNED_MAX_PAIRS = 160
 # 0.1); with the separated start (collision.separated_start) 1e-3 took 22.5 and 21.0 (two
 # seeds) against 25.0 and 23.5 at 1e-2; talos-box-collision 19.5 and 18 either way
 COLLISION_MU_INIT = 1e-3
+# IPOPT's first Hessian regularization and its growth while the inertia is wrong, for the
+# collision runs: sphere-box rows pressed near a box edge and sphere pairs sliding on each
+# other bend the Lagrangian down (eigenvalues to -400 at Talos' box solutions)
+COLLISION_PERTURBATION: tuple[float, float] | None = (1e-3, 10.0)
 
 
 # Torque continuation: a program that IPOPT found locally infeasible is solved with its torque
@@ -284,6 +288,11 @@ def _solve_avoiding(
     cold = problem.solver_options
     if cold.mu_init is None:
         problem.solver_options = dataclasses.replace(cold, mu_init=COLLISION_MU_INIT)
+    if COLLISION_PERTURBATION is not None and cold.first_hessian_perturbation is None:
+        first, factor = COLLISION_PERTURBATION
+        problem.solver_options = dataclasses.replace(
+            problem.solver_options, first_hessian_perturbation=first, perturb_inc_fact_first=factor
+        )
     cold_run = problem.solver_options
     lam: dict[str, Any] | None = None
     try:
