@@ -409,6 +409,10 @@ def test_broad_phase_of_the_self_pairs_keeps_every_close_pair(talos):
             np.testing.assert_allclose(d[computed], exact[computed], atol=1e-12)
             assert np.all(exact[~computed] >= within)
             assert (exact < within).sum() <= computed.sum() < len(d)  # it does skip some
+            subset = np.arange(0, len(d), 7)
+            np.testing.assert_array_equal(
+                pm.self_distances_within(centers, within, subset), d[subset]
+            )
 
 
 def test_the_separated_start_parts_pressed_pairs_and_keeps_the_supports(talos):

@@ -183,6 +183,11 @@ class ProxyModel:
         keys = np.minimum(ja, jb) * n + np.maximum(ja, jb)
         links, self._pair_link = np.unique(keys, return_inverse=True)
         self._link_a, self._link_b = links // n, links % n
+        # the pairs of each pair of joints, contiguous: _by_link[_link_start[l]:_link_start[l+1]]
+        self._by_link = np.argsort(self._pair_link, kind="stable")
+        self._link_start = np.searchsorted(
+            self._pair_link[self._by_link], np.arange(len(links) + 1)
+        )
 
     def centers_world(self, model: pin.Model, data: pin.Data) -> np.ndarray:
         """(S, 3) sphere centres in world for the placements already in ``data.oMi``:
@@ -204,11 +209,13 @@ class ProxyModel:
         b = self._mean @ centers  # the bounding spheres' world centres
         gap = np.linalg.norm(b[self._link_a] - b[self._link_b], axis=1)
         gap -= self._bound_radius[self._link_a] + self._bound_radius[self._link_b]
-        index = np.arange(len(self.self_pairs)) if subset is None else subset
-        near = np.flatnonzero(gap[self._pair_link[index]] < within)
-        out = np.full(len(index), np.inf)
-        out[near] = self_distances(self, centers, self.self_pairs[index[near]])
-        return out
+        start = self._link_start
+        near = [self._by_link[start[k] : start[k + 1]] for k in np.flatnonzero(gap < within)]
+        out = np.full(len(self.self_pairs), np.inf)
+        if near:
+            pairs = np.concatenate(near)
+            out[pairs] = self_distances(self, centers, self.self_pairs[pairs])
+        return out if subset is None else out[subset]
 
     @property
     def radii(self) -> np.ndarray:
