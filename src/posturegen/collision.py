@@ -164,6 +164,7 @@ class ProxyModel:
         self._local = np.array([s.center for s in self.spheres]).reshape(-1, 3)  # (S, 3)
         self._radii = np.array([s.radius for s in self.spheres])  # (S,)
         self._joints = np.unique(self._joint)  # the joints that carry spheres
+        self._joint_list = [int(j) for j in self._joints]
         # broad phase of the self pairs: per joint, a sphere around its proxies (centred on the
         # mean of their centres, so its world centre is the mean of theirs); per candidate
         # pair, the index of its pair of joints
@@ -184,6 +185,12 @@ class ProxyModel:
         links, self._pair_link = np.unique(keys, return_inverse=True)
         self._link_a, self._link_b = links // n, links % n
         # the pairs of each pair of joints, contiguous: _by_link[_link_start[l]:_link_start[l+1]]
+        pairs = np.asarray(self.self_pairs, dtype=int).reshape(-1, 2)
+        self._pair_i, self._pair_j = (
+            np.ascontiguousarray(pairs[:, 0]),
+            np.ascontiguousarray(pairs[:, 1]),
+        )
+        self._pair_r = self._radii[self._pair_i] + self._radii[self._pair_j]  # r_i + r_j
         self._by_link = np.argsort(self._pair_link, kind="stable")
         self._link_start = np.searchsorted(
             self._pair_link[self._by_link], np.arange(len(links) + 1)
@@ -193,8 +200,8 @@ class ProxyModel:
         """(S, 3) sphere centres in world for the placements already in ``data.oMi``:
         c_world = R_j·c + p_j of each sphere's joint j."""
         T = np.zeros((model.njoints, 4, 4))
-        for j in self._joints:
-            T[j] = data.oMi[int(j)].homogeneous
+        oMi = data.oMi
+        T[self._joints] = [oMi[j].homogeneous for j in self._joint_list]
         T = T[self._joint]  # (S, 4, 4)
         return np.einsum("sij,sj->si", T[:, :3, :3], self._local) + T[:, :3, 3]
 
@@ -209,13 +216,17 @@ class ProxyModel:
         b = self._mean @ centers  # the bounding spheres' world centres
         gap = np.linalg.norm(b[self._link_a] - b[self._link_b], axis=1)
         gap -= self._bound_radius[self._link_a] + self._bound_radius[self._link_b]
-        start = self._link_start
-        near = [self._by_link[start[k] : start[k + 1]] for k in np.flatnonzero(gap < within)]
+        k = np.flatnonzero(gap < within)  # the joint pairs that pass
+        first, count = self._link_start[k], np.diff(self._link_start)[k]
+        # their sphere pairs: the runs _by_link[first:first + count], gathered at once
+        run_start = np.cumsum(count) - count
+        pairs = self._by_link[np.arange(count.sum()) + np.repeat(first - run_start, count)]
         out = np.full(len(self.self_pairs), np.inf)
-        if near:
-            pairs = np.concatenate(near)
-            out[pairs] = self_distances(self, centers, self.self_pairs[pairs])
-        return out if subset is None else out[subset]
+        u = centers[self._pair_i[pairs]] - centers[self._pair_j[pairs]]
+        out[pairs] = np.sqrt(np.einsum("ij,ij->i", u, u)) - self._pair_r[pairs]
+        if subset is None or len(subset) == len(self.self_pairs):  # subset: sorted indices
+            return out
+        return out[subset]
 
     @property
     def radii(self) -> np.ndarray:
