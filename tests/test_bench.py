@@ -71,7 +71,7 @@ def test_compared_families_are_the_same_problems(pair):
 
 
 def test_compared_families_run_interleaved(monkeypatch):
-    """Problem i of the baseline, then problem i of the variant; other families alone."""
+    """Blocks of the baseline and of the variant in turn; other families alone."""
     from posturegen import bench
 
     order = []
@@ -82,16 +82,20 @@ def test_compared_families_run_interleaved(monkeypatch):
         step(self, i)
 
     monkeypatch.setattr(bench._FamilyRun, "step", recording)
+    monkeypatch.setattr(bench, "INTERLEAVE_BLOCK", 2)
     seen = []
     names = ["talos-box-collision", "talos-stand-reach", "talos-box-free"]
-    reports = bench.run_families(names, n=2, done=lambda r: seen.append(r.family))
+    reports = bench.run_families(names, n=3, done=lambda r: seen.append(r.family))
     assert [r.family for r in reports] == names
     assert sorted(seen) == sorted(names)
     assert order == [
         ("talos-box-free", 0),
-        ("talos-box-collision", 0),
         ("talos-box-free", 1),
+        ("talos-box-collision", 0),
         ("talos-box-collision", 1),
+        ("talos-box-free", 2),
+        ("talos-box-collision", 2),
         ("talos-stand-reach", 0),
         ("talos-stand-reach", 1),
+        ("talos-stand-reach", 2),
     ]

@@ -248,3 +248,19 @@ def test_a_run_that_does_not_converge_restarts_from_the_torque_relaxed_solution(
     assert result.posture["torque_limit_scale"] == 1.0
     assert result.posture["ipopt_runs"] == 3
     assert result.iterations > 3
+
+
+@pytest.mark.parametrize("preset", [None, "2"])
+def test_importing_posturegen_makes_blas_single_threaded_unless_set(preset):
+    """posturegen._threads: OPENBLAS_NUM_THREADS defaults to 1; a user's value stays."""
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if preset is not None:
+        env["OPENBLAS_NUM_THREADS"] = preset
+    code = "import posturegen, os; print(os.environ['OPENBLAS_NUM_THREADS'])"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == (preset or "1")

@@ -7,6 +7,7 @@ contacts (Brossette et al., IROS 2014).
     >>> result.success, result.q, result.torques
 """
 
+from . import _threads  # noqa: F401  (first: before numpy loads OpenBLAS)
 from .errors import InputError, ModelError, PosturegenError, SolveError
 from .problem import Problem, SolverOptions
 from .robot import Robot, load_robot
