@@ -24,7 +24,8 @@ links' twist Jacobians; tested equal to CasADi's): CasADi's automatic Hessian re
 pair's work once per colour of its columns, and was two thirds of Talos' Hessian of the
 Lagrangian with 150 self pairs.
 
-Rows are kept few by an active set: only the pairs closer than ``activation`` at the current
+Rows are kept few by an active set: only the pairs closer than ``activation`` (self pairs;
+``environment_activation`` for sphere-box pairs) at the current
 posture enter the program; after a solve every candidate pair is checked and the violated ones
 are added before solving again (:func:`posturegen.solve.solve`). Candidates exclude pairs of one
 joint, parent-child joints, the SRDF's disabled pairs, the user's exclusions, and pairs whose
@@ -406,7 +407,13 @@ class CollisionOptions:
     margin: float = 0.01
     exclude: tuple[tuple[str, str], ...] = ()
     environment: bool = True  # avoid the scene's obstacles and support surfaces
-    activation: float = 0.05  # pairs closer than margin + activation enter the program [m]
+    activation: float = 0.05  # self pairs closer than margin + activation enter the program [m]
+    # sphere-box pairs closer than margin + this enter the program [m]. Smaller than for self
+    # pairs: fewer rows (talos-box-collision, in-process A/B, 4 rounds: 9.9 ms median at 3 cm,
+    # 9.5 at 2 cm, 9.3 at 1 cm, 11.2 at 5 cm), but at 2 cm HRP-2's vertical ladder stage 'left
+    # foot on rung 4' failed (tests/test_scenes.py). Self pairs: 13.7 ms at 5 cm, 13.5 at 3 cm,
+    # 16.8 at 2 cm (talos-near-body-collision: the pairs met later force re-solves)
+    environment_activation: float = 0.03
     max_rounds: int = 6  # active-set rounds
     tighten: int = 2  # retries with a 1 cm larger margin when the mesh check fails
 

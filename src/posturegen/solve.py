@@ -301,9 +301,8 @@ def _solve_avoiding(
                 d_self, d_env = distances(q_check)
                 close = margin + opts.activation
                 new_self = {tuple(map(int, cand_self[k])) for k in np.flatnonzero(d_self < close)}
-                new_env = {
-                    (int(i), int(k)) for i, k in zip(*np.nonzero(d_env < close), strict=True)
-                }
+                near = d_env < margin + opts.environment_activation
+                new_env = {(int(i), int(k)) for i, k in zip(*np.nonzero(near), strict=True)}
                 if runs:
                     bad_self = {
                         tuple(map(int, cand_self[k]))
