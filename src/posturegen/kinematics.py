@@ -249,19 +249,27 @@ class CasadiKinematics:
         J[0:3, 0:3] = Rb
         J[0:3, 3:6] = -skew(p_world - pb) @ Rb
         J[3:6, 3:6] = Rb
+        self._joint_columns(J, state, joint_id, p_world, 6)
+        return J
+
+    def _joint_columns(
+        self, J: Expr, state: KinematicState, joint_id: int, p: Expr, offset: int
+    ) -> None:
+        """Fill the columns offset + idx_j of J (6, ·) with the geometric Jacobian of a point p
+        on joint ``joint_id``'s body: revolute ``[a_k × (p - o_k); a_k]``, prismatic
+        ``[a_k; 0]``, for its supporting joints k."""
         for k in self.model.supports[joint_id]:
             k = int(k)
             if k < 2:
                 continue
             info = self._joints[k]
             a = state.R[k] @ info.axis
-            col = 6 + info.idx_j
+            col = offset + info.idx_j
             if info.kind == "revolute":
-                J[0:3, col] = ca.cross(a, p_world - state.p[k])
+                J[0:3, col] = ca.cross(a, p - state.p[k])
                 J[3:6, col] = a
             else:
                 J[0:3, col] = a
-        return J
 
     def twist_jacobians(
         self, state: KinematicState, joint_ids: Sequence[int], base_rotation: Expr | None = None
@@ -293,18 +301,7 @@ class CasadiKinematics:
                 for m in range(3):
                     J[0:3, 3 + m] = ca.cross(omega_w[:, m], r)
                 J[3:6, 3:6] = omega_w
-            for k in self.model.supports[i]:
-                k = int(k)
-                if k < 2:
-                    continue
-                info = self._joints[k]
-                a = state.R[k] @ info.axis
-                col = nb + info.idx_j
-                if info.kind == "revolute":
-                    J[0:3, col] = ca.cross(a, state.p[i] - state.p[k])
-                    J[3:6, col] = a
-                else:
-                    J[0:3, col] = a
+            self._joint_columns(J, state, i, state.p[i], nb)
             out[i] = J
         return out
 
