@@ -63,6 +63,19 @@ def test_library_key_covers_the_compiler_flags(monkeypatch):
     assert codegen.library_key(nlp) != key
 
 
+def test_library_key_covers_the_code_of_hand_built_derivatives(monkeypatch):
+    """Programs with BlockDerivatives add the package's source digest to their key (their
+    derivative functions are built only for a solver made from the expressions)."""
+    from posturegen import problem as P
+
+    plain = _problem("off")._program()
+    assert plain.derivative_key == "" and plain.derivative_functions == {}
+    nlp = plain.function
+    key = codegen.library_key(nlp, "abc")
+    assert key != codegen.library_key(nlp) and key == codegen.library_key(nlp, "abc")
+    assert P._source_digest() == P._source_digest()  # cached, stable within a process
+
+
 def test_modes():
     assert codegen.resolve_mode("off") == "off"
     with pytest.raises(ValueError, match="codegen mode"):

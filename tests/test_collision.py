@@ -119,8 +119,13 @@ def test_hand_built_derivatives_match_casadi_and_finite_differences():
     data["obstacles"] = [{"name": "box", "box": [0.3, 0.3, 0.3], "position": [0.5, 0.15, 0.9]}]
     problem = problem_from_dict(data)
     solve(problem)  # sets the active collision rows
-    prog, compiled = problem._program(), problem.compile()
-    assert set(prog.derivative_functions) == {"jac_g", "hess_lag"}
+    from posturegen import problem as problem_module
+
+    problem_module._PROGRAMS.clear()
+    prog = problem._program()
+    assert prog._derivatives is None  # built on first use: a solver made from the expressions
+    compiled = problem.compile()
+    assert set(prog.derivative_functions) == {"jac_g", "hess_lag"} and prog.derivative_key
     jac_g, hess_lag = prog.derivative_functions["jac_g"], prog.derivative_functions["hess_lag"]
     x, p_sym, f, g = prog.x, prog.p, prog.f, prog.g
     lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", g.shape[0])

@@ -85,16 +85,17 @@ def resolve_mode(option: str | None) -> str:
     return mode
 
 
-def library_key(nlp: ca.Function, *derivatives: ca.Function) -> str:
-    """SHA-256 (20 hex digits) of the program (x, p) -> (f, g), its hand-built derivative
-    functions if any (posturegen.problem.BlockDerivatives), the CasADi version, the machine and
-    the compiler flags."""
+def library_key(nlp: ca.Function, extra: str = "") -> str:
+    """SHA-256 (20 hex digits) of the program (x, p) -> (f, g), ``extra`` (what else its
+    derivative functions depend on: posturegen.problem._Program.derivative_key), the CasADi
+    version, the machine and the compiler flags."""
     h = hashlib.sha256()
     h.update(
-        repr((CODEGEN_VERSION, ca.__version__, platform.machine(), HOT_FLAGS, COLD_FLAGS)).encode()
+        repr(
+            (CODEGEN_VERSION, ca.__version__, platform.machine(), HOT_FLAGS, COLD_FLAGS, extra)
+        ).encode()
     )
-    for fn in (nlp, *derivatives):
-        h.update(fn.serialize().encode())
+    h.update(nlp.serialize().encode())
     return h.hexdigest()[:20]
 
 

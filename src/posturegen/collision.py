@@ -37,6 +37,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -669,7 +670,7 @@ def _soft_min_rows(
     rows: list[list[_Element]],
     margin: Any,
     base_rotation: Any,
-) -> tuple[Any, BlockDerivatives]:
+) -> tuple[Any, Callable[[], BlockDerivatives]]:
     """Rows softmin_β(v_e) - margin over elements of sphere centres in ``state``, and their
     derivatives w.r.t. z (``CasadiKinematics.twist_jacobians``: z = qj for a state of fixed
     base, else (p_base, w, qj)).
@@ -682,87 +683,101 @@ def _soft_min_rows(
     f_i = Σ λ ∂row/∂c_i, F_L = Σ f_i, G_L = Σ f_i s_iᵀ held fixed. CasADi's own Hessian
     repeats each sphere pair's work once per colour of the Hessian's columns; this one does
     it once (Talos, 153 pairs: 74k instead of 117k instructions, tests/test_collision.py
-    checks both equal)."""
-    kin = ctx.kin
-    lam = ca.SX.sym("lam", len(rows))
-    link_of = {i: spheres[i].joint_id for row in rows for e in row for i in e.grads}
-    J = kin.twist_jacobians(state, sorted(set(link_of.values())), base_rotation)
-    rho = {i: state.R[L] @ spheres[i].center for i, L in link_of.items()}
-    nz = next(iter(J.values())).shape[1] if J else 0
-    diag = {i: ca.SX.zeros(3, 3) for i in link_of}  # Σ λ w K_ii per centre
-    cross: dict[tuple[int, int], Any] = {}  # Σ λ w K_ij per pair of centres
-    first = {i: ca.SX.zeros(3) for i in link_of}  # f_i
-    values, jac_rows, rank_one = [], [], ca.SX(nz, nz)
-    for k, elements in enumerate(rows):
+    checks both equal). The derivatives are built when the returned function is called, that
+    is only when a solver is built from the expressions: a structure whose library is in the
+    disk cache does not pay for them."""
+    values, soft = [], []  # soft[k]: (exp(-β(v - min v)), its sum) of row k's smooth minimum
+    for elements in rows:
         v = ca.vertcat(*[e.value for e in elements])
         if len(elements) == 1:
             values.append(v - margin)
-            weights: Any = [1.0]
+            soft.append(None)
         else:
             m = ca.mmin(v)
             ex = ca.exp(-SOFT_MIN_BETA * (v - m))
             total = ca.sum1(ex)
             values.append(m - ca.log(total) / SOFT_MIN_BETA - margin)
-            weights = [ex[n] / total for n in range(len(elements))]
-        gbar: dict[int, Any] = {}
-        for e, w in zip(elements, weights, strict=True):
-            for i, g in e.grads.items():
-                gbar[i] = gbar.get(i, 0) + w * g
-            for (i, j), K in e.curvature.items():
-                if i == j:
-                    diag[i] = diag[i] + lam[k] * w * K
-                else:
-                    cross[(i, j)] = cross.get((i, j), 0) + lam[k] * w * K
-        wrench: dict[int, Any] = {}
-        for i, g in gbar.items():
-            first[i] = first[i] + lam[k] * g
-            L = link_of[i]
-            wrench[L] = wrench.get(L, 0) + ca.vertcat(g, ca.cross(rho[i], g))
-        grad = ca.SX(nz, 1)
-        for L, W in wrench.items():
-            grad = grad + J[L].T @ W
-        jac_rows.append(grad.T)
-        if len(gbar) == 1:
-            ((i, g),) = gbar.items()
-            diag[i] = diag[i] + lam[k] * SOFT_MIN_BETA * (g @ g.T)
-        elif gbar:
-            rank_one = rank_one + lam[k] * SOFT_MIN_BETA * (grad @ grad.T)
-    blocks: dict[tuple[int, int], Any] = {}
-    for i, D in diag.items():
-        L = link_of[i]
-        blocks[(L, L)] = blocks.get((L, L), 0) + _twist_block(D, rho[i], rho[i])
-    for (i, j), X in cross.items():
-        a, b = (i, j) if link_of[i] <= link_of[j] else (j, i)
-        X = X if a == i else X.T
-        key = (link_of[a], link_of[b])
-        blk = _twist_block(X, rho[a], rho[b])
-        blocks[key] = blocks.get(key, 0) + (blk if key[0] != key[1] else blk + blk.T)
-    H = rank_one
-    for (La, Lb), M in blocks.items():
-        part = J[La].T @ M @ J[Lb]
-        H = H + (part if La == Lb else part + part.T)
-    # second derivatives of the kinematics, weighted by the first-order ones
-    syms, vals, weighted = [], [], 0
-    for L in sorted(J):
-        F, G = ca.SX.sym(f"F{L}", 3), ca.SX.sym(f"G{L}", 3, 3)
-        mine = [i for i in first if link_of[i] == L]
-        syms += [F, ca.vec(G)]
-        vals += [
-            sum((first[i] for i in mine), ca.SX.zeros(3)),
-            ca.vec(sum((first[i] @ ca.DM(spheres[i].center).T for i in mine), ca.SX.zeros(3, 3))),
-        ]
-        weighted = weighted + ca.dot(F, state.p[L]) + ca.sum1(ca.sum2(G * state.R[L]))
+            soft.append((ex, total))
     z = (
         ctx.joints
         if base_rotation is None
         else ca.vertcat(ctx.base_position, base_rotation, ctx.joints)
     )
-    if syms:
-        Hk = ca.hessian(weighted, z)[0]
-        H = H + ca.substitute(Hk, ca.vertcat(*syms), ca.vertcat(*vals))
-    value = ca.vertcat(*values)
-    jac = ca.vertcat(*jac_rows) if jac_rows else ca.SX(0, nz)
-    return value, BlockDerivatives(z=z, jacobian=jac, lam=lam, hessian=H)
+
+    def build() -> BlockDerivatives:
+        kin = ctx.kin
+        lam = ca.SX.sym("lam", len(rows))
+        link_of = {i: spheres[i].joint_id for row in rows for e in row for i in e.grads}
+        J = kin.twist_jacobians(state, sorted(set(link_of.values())), base_rotation)
+        rho = {i: state.R[L] @ spheres[i].center for i, L in link_of.items()}
+        nz = next(iter(J.values())).shape[1] if J else 0
+        diag = {i: ca.SX.zeros(3, 3) for i in link_of}  # Σ λ w K_ii per centre
+        cross: dict[tuple[int, int], Any] = {}  # Σ λ w K_ij per pair of centres
+        first = {i: ca.SX.zeros(3) for i in link_of}  # f_i
+        jac_rows, rank_one = [], ca.SX(nz, nz)
+        for k, elements in enumerate(rows):
+            if soft[k] is None:
+                weights: Any = [1.0]
+            else:
+                ex, total = soft[k]
+                weights = [ex[n] / total for n in range(len(elements))]
+            gbar: dict[int, Any] = {}
+            for e, w in zip(elements, weights, strict=True):
+                for i, g in e.grads.items():
+                    gbar[i] = gbar.get(i, 0) + w * g
+                for (i, j), K in e.curvature.items():
+                    if i == j:
+                        diag[i] = diag[i] + lam[k] * w * K
+                    else:
+                        cross[(i, j)] = cross.get((i, j), 0) + lam[k] * w * K
+            wrench: dict[int, Any] = {}
+            for i, g in gbar.items():
+                first[i] = first[i] + lam[k] * g
+                L = link_of[i]
+                wrench[L] = wrench.get(L, 0) + ca.vertcat(g, ca.cross(rho[i], g))
+            grad = ca.SX(nz, 1)
+            for L, W in wrench.items():
+                grad = grad + J[L].T @ W
+            jac_rows.append(grad.T)
+            if len(gbar) == 1:
+                ((i, g),) = gbar.items()
+                diag[i] = diag[i] + lam[k] * SOFT_MIN_BETA * (g @ g.T)
+            elif gbar:
+                rank_one = rank_one + lam[k] * SOFT_MIN_BETA * (grad @ grad.T)
+        blocks: dict[tuple[int, int], Any] = {}
+        for i, D in diag.items():
+            L = link_of[i]
+            blocks[(L, L)] = blocks.get((L, L), 0) + _twist_block(D, rho[i], rho[i])
+        for (i, j), X in cross.items():
+            a, b = (i, j) if link_of[i] <= link_of[j] else (j, i)
+            X = X if a == i else X.T
+            key = (link_of[a], link_of[b])
+            blk = _twist_block(X, rho[a], rho[b])
+            blocks[key] = blocks.get(key, 0) + (blk if key[0] != key[1] else blk + blk.T)
+        H = rank_one
+        for (La, Lb), M in blocks.items():
+            part = J[La].T @ M @ J[Lb]
+            H = H + (part if La == Lb else part + part.T)
+        # second derivatives of the kinematics, weighted by the first-order ones
+        syms, vals, weighted = [], [], 0
+        for L in sorted(J):
+            F, G = ca.SX.sym(f"F{L}", 3), ca.SX.sym(f"G{L}", 3, 3)
+            mine = [i for i in first if link_of[i] == L]
+            syms += [F, ca.vec(G)]
+            vals += [
+                sum((first[i] for i in mine), ca.SX.zeros(3)),
+                ca.vec(
+                    sum((first[i] @ ca.DM(spheres[i].center).T for i in mine), ca.SX.zeros(3, 3))
+                ),
+            ]
+            weighted = weighted + ca.dot(F, state.p[L]) + ca.sum1(ca.sum2(G * state.R[L]))
+        if syms:
+            Hk = ca.hessian(weighted, z)[0]
+            H = H + ca.substitute(Hk, ca.vertcat(*syms), ca.vertcat(*vals))
+        jac = ca.vertcat(*jac_rows) if jac_rows else ca.SX(0, nz)
+        return BlockDerivatives(z=z, jacobian=jac, lam=lam, hessian=H)
+
+    return ca.vertcat(*values), build
 
 
 # CollisionTerm.self_groups per (proxy model, pairs); the model is held: its id stays its own
