@@ -603,15 +603,6 @@ SOFT_MIN_BETA = 200.0
 ENV_SATURATION = 0.05
 
 
-def _soft_min(values: list[Any]) -> Any:
-    """-LSE_β(-v) <= min(v): a smooth, conservative minimum (by at most log(n)/β)."""
-    if len(values) == 1:
-        return values[0]
-    v = ca.vertcat(*values)
-    m = ca.mmin(v)
-    return m - ca.log(ca.sum1(ca.exp(-SOFT_MIN_BETA * (v - m)))) / SOFT_MIN_BETA
-
-
 def _center(state: Any, sphere: Sphere) -> Any:
     """Symbolic centre (3,) of a proxy sphere in the frame of a kinematic state."""
     return state.p[sphere.joint_id] + state.R[sphere.joint_id] @ sphere.center

@@ -376,7 +376,7 @@ def _self_candidates(
     if len(_CANDIDATES) > 64:
         _CANDIDATES.clear()
     _CANDIDATES[key] = (pm, index, pm.self_pairs[index])
-    return index, pm.self_pairs[index]
+    return _CANDIDATES[key][1], _CANDIDATES[key][2]
 
 
 def _excluded_pairs(problem: Problem) -> set[tuple[int, int]]:

@@ -301,8 +301,6 @@ def mesh_collision_checks(
     col = posture["collision"]
     data = scratch_data(model)
     pin.forwardKinematics(model, data, q)
-    gdata = geometry.createData()
-    pin.updateGeometryPlacements(model, data, geometry, gdata)
     out = []
     if col.get("self"):
         srdf = posture["robot"].get("srdf")
@@ -320,6 +318,8 @@ def mesh_collision_checks(
     hits = []
     boxes = col.get("boxes", [])
     if boxes:
+        gdata = geometry.createData()
+        pin.updateGeometryPlacements(model, data, geometry, gdata)
         # broad phase: the objects whose bounding sphere reaches a box
         centres, radii = _bounding_spheres(geometry)
         parents = [int(obj.parentJoint) for obj in geometry.geometryObjects]
