@@ -375,8 +375,9 @@ class _FamilyRun:
         t0 = time.perf_counter()
         result = solve(problem)
         self.calls.append(time.perf_counter() - t0)
-        self.rows.append(problem.compile().n_g)  # the last run's structure (collision rows vary)
-        self.c_solves += problem.compile().library
+        compiled = problem.compile()  # the last run's structure (collision rows vary)
+        self.rows.append(compiled.n_g)
+        self.c_solves += compiled.library
         self.times.append(result.solve_time_s)
         self.iters.append(result.iterations)
         if result.success:
