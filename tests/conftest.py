@@ -1,40 +1,27 @@
-"""Shared fixtures: robots (Talos bundled; HRP-2 and ATLAS from ../shared/robots)."""
+"""Shared fixtures: robots (all shipped by name: Talos, G1, Romeo, HRP-2, ATLAS)."""
 
 from __future__ import annotations
 
 import dataclasses
 import os
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
-import pinocchio as pin
 import pytest
 
-from posturegen.robot import load_bundled
+from posturegen.robot import load_bundled, shipped_models_dir
 
 # Solvers run CasADi's virtual machine in the tests (no background compilation of every reused
 # structure into ~/.cache); tests/test_codegen.py sets its modes explicitly.
 os.environ.setdefault("POSTUREGEN_CODEGEN", "off")
 
-ROOT = Path(__file__).resolve().parents[1]
-SHARED_ROBOTS = ROOT.parent / "shared" / "robots"
-HRP2_URDF = SHARED_ROBOTS / "hrp2" / "hrp2.urdf"
-ATLAS_URDF = SHARED_ROBOTS / "drake_models" / "atlas" / "atlas_convex_hull.urdf"
+# the URDF files of the paper's robots that posturegen ships (for tests that load them by path)
+HRP2_URDF = shipped_models_dir() / "hrp2" / "hrp2.urdf"
 
 
 @pytest.fixture(scope="session")
 def talos():
     return load_bundled("talos")
-
-
-def shared_model(urdf: Path) -> pin.Model:
-    """A free-flyer model of one of the shared URDFs; fails loudly when shared/ is missing."""
-    if not urdf.is_file():
-        raise FileNotFoundError(
-            f"{urdf} missing: tests read the paper's robots from ../shared/robots"
-        )
-    return pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
 
 
 def first_run_stops_early(real: Callable, calls: list, record: Callable) -> Callable:

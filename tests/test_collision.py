@@ -24,17 +24,13 @@ from posturegen.collision import (
 from posturegen.errors import InputError
 from posturegen.robot import load_robot
 from posturegen.verify import mesh_collision_checks
-from tests.conftest import ATLAS_URDF, HRP2_URDF, first_run_stops_early
+from tests.conftest import first_run_stops_early
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
 ROBOTS = {
     "talos": "talos",
-    "hrp2": {
-        "urdf": str(HRP2_URDF),
-        "srdf": str(HRP2_URDF.with_suffix(".srdf")),
-        "patches": "hrp2",
-    },
-    "atlas": {"urdf": str(ATLAS_URDF), "package_dirs": [str(ATLAS_URDF.parents[2])]},
+    "hrp2": "hrp2",
+    "atlas": "atlas",
 }
 
 

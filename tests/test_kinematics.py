@@ -8,7 +8,6 @@ import pinocchio as pin
 import pytest
 
 from posturegen.kinematics import CasadiKinematics, so3_exp
-from tests.conftest import ATLAS_URDF, HRP2_URDF, shared_model
 
 TOL = 1e-9
 
@@ -16,11 +15,7 @@ TOL = 1e-9
 def _models():
     from posturegen.robot import load_bundled
 
-    return {
-        "talos": load_bundled("talos").model,
-        "hrp2": shared_model(HRP2_URDF),
-        "atlas": shared_model(ATLAS_URDF),
-    }
+    return {name: load_bundled(name).model for name in ("talos", "hrp2", "atlas")}
 
 
 MODELS = _models()

@@ -16,22 +16,13 @@ from posturegen import problem_from_dict, solve
 from posturegen.cli import _demo_dir
 from posturegen.errors import InputError
 from posturegen.robot import BUNDLED, Patch, Robot, load_robot
-from tests.conftest import ATLAS_URDF, HRP2_URDF
 
 ROBOTS = {
     "talos": "talos",
     "g1": "g1",
     "romeo": "romeo",
-    "hrp2": {
-        "urdf": str(HRP2_URDF),
-        "srdf": str(HRP2_URDF.with_suffix(".srdf")),
-        "patches": "hrp2",
-    },
-    "atlas": {
-        "urdf": str(ATLAS_URDF),
-        "patches": "atlas",
-        "package_dirs": [str(ATLAS_URDF.parents[2])],
-    },
+    "hrp2": "hrp2",
+    "atlas": "atlas",
 }
 PATCHES = ("left_sole", "right_sole", "left_hand", "right_hand")
 SUPPORT_TOL = 1e-3  # no geometry beyond the patch plane by more than this [m]

@@ -10,6 +10,7 @@ import pytest
 
 from posturegen import scenes
 from posturegen.errors import InputError
+from posturegen.robot import load_robot, shipped_models_dir
 from posturegen.sequence import run_sequence, stage_problem_dict
 from posturegen.spec import problem_from_dict
 from posturegen.verify import verify_file
@@ -111,14 +112,17 @@ def test_stairs_on_talos_maximizes_the_ellipse_against_the_riser(tmp_path: Path)
     assert verify_file(tmp_path / report.stages[-1].posture_file).ok
 
 
-def test_paper_robots_are_found_or_named(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
-    spec = scenes.robot_spec("hrp2")
-    assert Path(spec["urdf"]).is_file()
-    monkeypatch.setenv("POSTUREGEN_ROBOTS", str(tmp_path))
+def test_paper_robots_are_shipped_and_named(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """HRP-2 and ATLAS load by name from any working directory (the package ships them)."""
     monkeypatch.chdir(tmp_path)
-    found = scenes.robots_dir()
-    # the source checkout still has ../shared/robots; only an installed copy would not
-    assert found is None or (found / "hrp2" / "hrp2.urdf").is_file()
+    for name in ("hrp2", "atlas"):
+        assert scenes.robot_spec(name) == name
+        robot = load_robot(name)
+        assert robot.urdf.is_file() and robot.urdf.is_relative_to(shipped_models_dir())
+        assert len(robot.collision_model().geometryObjects) > 0
+        assert robot.model.nv == 36
     with pytest.raises(InputError, match="unknown robot"):
         scenes.robot_spec("asimo")
 

@@ -167,7 +167,8 @@ def test_torque_limits_bind(talos):
 
 
 def test_custom_urdf_with_patch_file(tmp_path):
-    """HRP-2 from ../shared/robots, with its shipped patch file, standing and reaching."""
+    """HRP-2 loaded by path (the URDF posturegen ships) with the patch file named, standing and
+    reaching."""
     data = copy.deepcopy(STAND)
     data["robot"] = {
         "urdf": str(HRP2_URDF),

@@ -8,9 +8,7 @@
 #
 # A scene whose demo finds no verified posture gets no figure: the script says which and why,
 # leaves that scene's old figure as it was, goes on with the others and exits 1. Run it from
-# anywhere, in the environment where posturegen is installed (`pip install -e .`); the paper's
-# robots (hrp2, atlas) are found as `posturegen demo` finds them (shared/robots or
-# $POSTUREGEN_ROBOTS).
+# anywhere, in the environment where posturegen is installed (`pip install -e .`).
 set -euo pipefail
 SCENES=(stand-reach wall-brace ladder-inclined ladder-vertical stairs)
 robot=()

@@ -24,7 +24,14 @@ from .errors import InputError, ModelError
 from .geometry import ConvexPolygon
 from .kinematics import CasadiKinematics
 
-BUNDLED = ("talos", "g1", "romeo")
+# robots shipped by name: the first three from example-robot-data, the paper's two in
+# posturegen/data/models (public data that is not on PyPI; see its PROVENANCE.md)
+BUNDLED = ("talos", "g1", "romeo", "hrp2", "atlas")
+
+
+def shipped_models_dir() -> Path:
+    """Folder ``data/models`` of posturegen: the HRP-2 and ATLAS models it ships."""
+    return Path(str(importlib.resources.files("posturegen") / "data" / "models"))
 
 
 def example_robot_data_dir() -> Path:
@@ -315,7 +322,9 @@ def build_robot(
 
 @functools.lru_cache(maxsize=8)
 def load_bundled(name: str) -> Robot:
-    """A robot shipped with posturegen, by name (models from example-robot-data)."""
+    """A robot shipped with posturegen, by name: its patch file names the URDF (and SRDF)
+    relative to example-robot-data's robots folder, or with ``models: posturegen`` relative
+    to posturegen's own ``data/models`` (then also a package directory, with the URDF's)."""
     if name not in BUNDLED:
         raise InputError(
             "robot",
@@ -323,12 +332,18 @@ def load_bundled(name: str) -> Robot:
             f"bundled robots: {', '.join(BUNDLED)}, or give {{urdf: PATH, ...}}",
         )
     data = read_patch_file(_bundled_patch_file(name))
-    root = example_robot_data_dir()
+    if data.get("models") == "posturegen":
+        root = shipped_models_dir()
+        # package:// meshes (ATLAS) from the models folder, relative ones (HRP-2) from the URDF's
+        package_dirs: tuple[Path, ...] = (root, (root / data["urdf"]).parent)
+    else:
+        root = example_robot_data_dir()
+        package_dirs = (root.parent.parent,)
     return build_robot(
         name,
         root / data["urdf"],
         root / data["srdf"] if data.get("srdf") else None,
-        (root.parent.parent,),
+        package_dirs,
         data,
     )
 

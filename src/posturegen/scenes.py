@@ -5,19 +5,13 @@ Each scene builder returns a sequence dict (see :mod:`posturegen.sequence`): the
 surfaces and obstacles and the stages that lead to the paper's situation (``demo``) or climb
 ``steps`` steps (``climb``). Geometry is in metres, world frame: x forward (towards the
 ladder or stairs), z up, the robot starting around the origin.
-
-The paper's robots HRP-2 and ATLAS are not on PyPI: :func:`robot_spec` finds their URDFs in
-a robots folder (``$POSTUREGEN_ROBOTS``, else ``shared/robots`` or ``../shared/robots`` from
-the working directory or from the source checkout).
 """
 
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -26,53 +20,17 @@ import pinocchio as pin
 from .errors import InputError
 from .robot import BUNDLED, load_robot
 
-PAPER_ROBOTS: dict[str, dict[str, Any]] = {
-    "hrp2": {"urdf": "hrp2/hrp2.urdf", "srdf": "hrp2/hrp2.srdf", "patches": "hrp2"},
-    "atlas": {
-        "urdf": "drake_models/atlas/atlas_convex_hull.urdf",
-        "patches": "atlas",
-        "package_dirs": ["."],
-    },
-}
-ROBOT_NAMES = (*BUNDLED, *PAPER_ROBOTS)
-
-
-def robots_dir() -> Path | None:
-    """The folder holding the paper's robot models, or None when there is none."""
-    env = os.environ.get("POSTUREGEN_ROBOTS")
-    candidates = [Path(env)] if env else []
-    here = Path(__file__).resolve()
-    for base in (Path.cwd(), *here.parents[:4]):
-        candidates += [base / "shared" / "robots", base.parent / "shared" / "robots"]
-    for c in candidates:
-        if (c / "hrp2" / "hrp2.urdf").is_file():
-            return c.resolve()
-    return None
+ROBOT_NAMES = BUNDLED
 
 
 def robot_spec(name: str) -> Any:
-    """The ``robot`` entry of a problem for a robot name (bundled or HRP-2/ATLAS)."""
-    if name in BUNDLED:
-        return name
-    if name not in PAPER_ROBOTS:
+    """The ``robot`` entry of a problem for a robot name (every shipped robot, HRP-2 and
+    ATLAS included, is named by itself)."""
+    if name not in BUNDLED:
         raise InputError(
             "--robot", f"unknown robot '{name}'", f"use one of: {', '.join(ROBOT_NAMES)}"
         )
-    root = robots_dir()
-    if root is None:
-        raise InputError(
-            "--robot",
-            f"the {name} model is not on PyPI and no robots folder was found",
-            "set POSTUREGEN_ROBOTS to the folder holding hrp2/ and drake_models/",
-        )
-    spec = dict(PAPER_ROBOTS[name])
-    spec["urdf"] = str(root / spec["urdf"])
-    if "srdf" in spec:
-        spec["srdf"] = str(root / spec["srdf"])
-    if "package_dirs" in spec:
-        spec["package_dirs"] = [str(root)]
-    spec["name"] = name
-    return spec
+    return name
 
 
 # --------------------------------------------------------------------------- geometry helpers
