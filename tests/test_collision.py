@@ -10,19 +10,17 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from posturegen import problem_from_dict, solve
 from posturegen.cli import _demo_dir
-from posturegen.collision import (
-    BETA,
-    MAX_SPHERE_RADIUS,
-    MAX_SPHERES,
-    fit_spheres,
-    geometry_points,
-    proxy_model,
-)
+from posturegen.collision import BETA
 from posturegen.errors import InputError
+from posturegen.proxies import proxy_model
+from posturegen.proxy_fit import EXCESS
 from posturegen.robot import load_robot
+from posturegen.surface import refine, surface_of
 from posturegen.verify import mesh_collision_checks
 from tests.conftest import first_run_stops_early
 
@@ -35,45 +33,132 @@ ROBOTS = {
 
 
 @pytest.mark.parametrize("name", sorted(ROBOTS))
-def test_proxies_contain_every_mesh_vertex(name):
+def test_proxies_contain_every_mesh_surface_and_stand_out_at_most_the_excess(name):
+    """Every triangle of every collision object (meshes and primitives, refined to 1.5 cm
+    edges) has its three corners in one sphere of its joint (a ball is convex: the triangle is
+    inside), and no sphere stands more than EXCESS outside (by construction; its record)."""
     robot = load_robot(ROBOTS[name])
     pm = proxy_model(robot)
     by_joint: dict[int, list] = {}
     for s in pm.spheres:
         by_joint.setdefault(s.joint_id, []).append(s)
     for obj in robot.collision_model().geometryObjects:
-        pts = geometry_points(obj)
+        surface = surface_of(obj)
+        V, F = refine(surface.vertices, surface.triangles, 0.015)
         spheres = by_joint[int(obj.parentJoint)]
-        inside = np.zeros(len(pts), dtype=bool)
-        for s in spheres:
-            inside |= np.linalg.norm(pts - s.center, axis=1) <= s.radius + 1e-9
-        assert inside.all(), f"{name}: {obj.name} has {np.sum(~inside)} vertices outside"
+        c = np.array([s.center for s in spheres])
+        r = np.array([s.radius for s in spheres])
+        inside = np.linalg.norm(V[:, None] - c[None], axis=2) <= r + 1e-9  # (n, S)
+        covered = inside[F[:, 0]] & inside[F[:, 1]] & inside[F[:, 2]]
+        assert covered.any(axis=1).all(), f"{name}: {obj.name} has triangles outside"
+    assert max(s.excess for s in pm.spheres) <= EXCESS + 1e-9
     assert len(pm.self_pairs) > 0
 
 
-def test_fit_spheres_cover_random_clouds():
+@given(
+    half=st.tuples(*[st.floats(0.005, 0.15)] * 3),
+    kind=st.sampled_from(["box", "cylinder", "capsule", "sphere"]),
+)
+@settings(max_examples=12, deadline=None)
+def test_fitted_spheres_cover_a_primitive_and_stand_out_at_most_the_excess(half, kind):
+    """fit_joint on a box, cylinder, capsule or sphere of random size: points drawn on its
+    true surface are inside the spheres, and points drawn on the spheres are at most EXCESS
+    (plus the sampling's own 1 mm) from the solid."""
+    import coal
+
+    from posturegen.proxy_fit import fit_joint
+
+    a, b, c = half
+    shape = {
+        "box": lambda: coal.Box(2 * a, 2 * b, 2 * c),
+        "cylinder": lambda: coal.Cylinder(a, 2 * b),
+        "capsule": lambda: coal.Capsule(a, 2 * b),
+        "sphere": lambda: coal.Sphere(a),
+    }[kind]()
+    obj = pin.GeometryObject("probe", 1, pin.SE3.Identity(), shape)
+    spheres = fit_joint(1, [surface_of(obj)])
     rng = np.random.default_rng(0)
-    for _ in range(20):
-        pts = rng.normal(size=(300, 3)) * rng.uniform(0.01, 0.3, 3)
-        spheres = fit_spheres(pts)
-        d = np.min([np.linalg.norm(pts - c, axis=1) - r for c, r in spheres], axis=0)
-        assert np.all(d <= 1e-9)
-        assert 1 <= len(spheres) <= MAX_SPHERES
-        # the radius cap holds unless every allowed sphere was used
-        radii = [r for _, r in spheres]
-        assert max(radii) <= MAX_SPHERE_RADIUS or len(spheres) == MAX_SPHERES
+    centres = np.array([s.center for s in spheres])
+    radii = np.array([s.radius for s in spheres])
+    on_surface = _surface_points(shape, rng, 400)
+    assert np.all(
+        np.min(np.linalg.norm(on_surface[:, None] - centres, axis=2) - radii, axis=1) <= 1e-9
+    )
+    u = rng.normal(size=(200, 3))
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    for s in spheres:
+        outside = _signed_distance(shape, s.center + s.radius * u)
+        assert outside.max() <= EXCESS + 1e-3
+
+
+def _surface_points(shape, rng, n):
+    """n points on the true surface of a coal box, cylinder, capsule or sphere (at the origin)."""
+    import coal
+
+    u = rng.normal(size=(n, 3))
+    if isinstance(shape, coal.Sphere):
+        return shape.radius * u / np.linalg.norm(u, axis=1)[:, None]
+    if isinstance(shape, coal.Box):
+        h = np.asarray(shape.halfSide)
+        p = rng.uniform(-1, 1, size=(n, 3)) * h
+        axis = rng.integers(0, 3, n)
+        p[np.arange(n), axis] = np.sign(rng.normal(size=n)) * h[axis]
+        return p
+    r, h = shape.radius, shape.halfLength
+    t = rng.uniform(0, 2 * np.pi, n)
+    z = rng.uniform(-h, h, n)
+    side = np.c_[r * np.cos(t), r * np.sin(t), z]
+    if isinstance(shape, coal.Capsule):
+        cap = r * u / np.linalg.norm(u, axis=1)[:, None]
+        cap[:, 2] += np.sign(cap[:, 2]) * h
+        return np.vstack([side, cap])
+    rho = r * np.sqrt(rng.uniform(0, 1, n))
+    ends = np.c_[rho * np.cos(t), rho * np.sin(t), np.sign(rng.normal(size=n)) * h]
+    return np.vstack([side, ends])
+
+
+def _signed_distance(shape, points):
+    """Distances [m] of points to a coal primitive at the origin (< 0 inside)."""
+    import coal
+
+    out = []
+    for p in points:
+        out.append(
+            coal.distance(
+                coal.Sphere(1e-9),
+                coal.Transform3s(np.eye(3), p),
+                shape,
+                coal.Transform3s(),
+                coal.DistanceRequest(),
+                coal.DistanceResult(),
+            )
+        )
+    return np.array(out)
 
 
 def test_proxies_are_cached_on_disk(tmp_path, monkeypatch):
-    monkeypatch.setenv("POSTUREGEN_CACHE", str(tmp_path))
+    """The first look-up fits and writes the cache file, the next one reads it back."""
+    from posturegen import proxies
+
     robot = load_robot(ROBOTS["hrp2"])
-    robot._proxy_model = None  # force a fresh look-up
+    real = proxy_model(robot)
+    calls = []
+
+    def fit(model, geometry, rule):
+        calls.append(rule)
+        return list(real.spheres), dict(real.report)
+
+    monkeypatch.setattr(proxies, "fit_robot", fit)
+    monkeypatch.setenv("POSTUREGEN_CACHE", str(tmp_path))
+    monkeypatch.setattr(robot, "_proxy_model", None)  # force a fresh look-up
     first = proxy_model(robot)
     files = list((tmp_path / "proxies").glob("*.json"))
-    assert len(files) == 1
+    assert len(files) == 1 and len(calls) == 1
     robot._proxy_model = None
     second = proxy_model(robot)
+    assert len(calls) == 1  # read back, not fitted again
     assert [s.radius for s in second.spheres] == pytest.approx([s.radius for s in first.spheres])
+    assert [s.excess for s in second.spheres] == pytest.approx([s.excess for s in first.spheres])
 
 
 def _fd(fun, x, h=1e-6):
@@ -178,8 +263,8 @@ def test_self_collision_is_avoided_on_the_meshes(talos, target):
     assert free.success
     # without the rows the arm goes through the body: coal sees it
     probe = copy.deepcopy(free.posture)
-    probe["collision"] = {"self": True, "exclude": [], "boxes": []}
-    hits = mesh_collision_checks(probe, talos.model, talos.collision_model(), free.q)
+    probe["collision"] = {"self": True, "unchecked": [], "boxes": []}
+    hits, _ = mesh_collision_checks(probe, talos.model, talos.collision_model(), free.q)
     assert hits[0].value > 0, "this target should make the arm cross the body"
     data["options"]["self_collision"] = True
     safe = solve(problem_from_dict(data))
@@ -197,7 +282,7 @@ def test_box_obstacle_is_avoided(talos):
     probe = copy.deepcopy(r_free.posture)
     probe["collision"] = {
         "self": False,
-        "exclude": [],
+        "unchecked": [],
         "boxes": [
             {
                 "name": "box",
@@ -207,7 +292,8 @@ def test_box_obstacle_is_avoided(talos):
             }
         ],
     }
-    assert mesh_collision_checks(probe, talos.model, talos.collision_model(), r_free.q)[0].value > 0
+    checks, _ = mesh_collision_checks(probe, talos.model, talos.collision_model(), r_free.q)
+    assert checks[0].value > 0
     r = solve(problem_from_dict(data))
     assert r.success, r.message
     assert r.posture["checks"]["collision: scene (meshes)"]["value"] == 0
@@ -266,21 +352,23 @@ def test_a_failed_active_set_loop_restarts_from_the_collision_free_solution(monk
 
 
 @pytest.mark.parametrize("name", sorted(ROBOTS))
-def test_the_reference_posture_keeps_every_candidate_pair_apart(name):
-    """Link pairs that the reference posture puts closer than REFERENCE_GAP (proxies) or in
-    contact (meshes) are excluded: the margin must be reachable near the reference."""
-    from posturegen.collision import REFERENCE_GAP, self_distances
-
+def test_the_reference_posture_passes_the_mesh_check_and_sets_the_clearances(name):
+    """The reference posture is verified on the meshes (the pairs that overlap there are
+    the rule's), and each candidate pair's clearance is its proxies' distance there."""
     robot = load_robot(ROBOTS[name])
     pm = proxy_model(robot)
-    data = robot.model.createData()
-    pin.forwardKinematics(robot.model, data, robot.q_init)
-    d = self_distances(pm, pm.centers_world(robot.model, data), pm.self_pairs)
-    assert d.min() >= REFERENCE_GAP
+    q = pm.rule.reference_q
     srdf = {"srdf": str(robot.srdf)} if robot.srdf else {}
-    probe = {"robot": srdf, "collision": {"self": True, "exclude": pm.excluded_joint_pairs}}
-    checks = mesh_collision_checks(probe, robot.model, robot.collision_model(), robot.q_init)
+    probe = {"robot": srdf, "collision": {"self": True, "unchecked": []}}
+    checks, _ = mesh_collision_checks(probe, robot.model, robot.collision_model(), q)
     assert checks[0].value == 0, checks[0].detail
+    data = robot.model.createData()
+    pin.forwardKinematics(robot.model, data, q)
+    centers = pm.centers_world(robot.model, data)
+    d = pm.distances(centers, np.arange(len(pm.self_pairs)))
+    closest = np.full(len(pm.joint_pairs), np.inf)
+    np.minimum.at(closest, pm.pair_link, d)
+    np.testing.assert_allclose(closest, pm.clearance, atol=1e-9)
 
 
 def test_box_rows_are_conservative_exact_near_and_saturated_far(talos):
@@ -356,7 +444,8 @@ def test_vectorized_proxy_centres_match_pinocchio(talos):
 
 def test_mesh_box_check_finds_what_a_brute_force_check_finds(talos):
     """The broad phase (bounding spheres of the collision objects) never hides a hit: boxes
-    dropped at random around the robot give the same hits as coal on every object."""
+    dropped at random around the robot fail the check exactly when coal on every object
+    finds one more than TOL_PENETRATION inside."""
     import coal
 
     from posturegen.verify import TOL_PENETRATION
@@ -376,7 +465,7 @@ def test_mesh_box_check_finds_what_a_brute_force_check_finds(talos):
         )
         box = {"name": "b", "placement": T.homogeneous.tolist(), "size": size.tolist()}
         probe = {"robot": {}, "collision": {"self": False, "boxes": [box]}}
-        value = mesh_collision_checks(probe, model, geometry, q)[0].value
+        value = mesh_collision_checks(probe, model, geometry, q)[0][0].value
         shape = coal.Box(*(size - 2 * TOL_PENETRATION))
         brute = 0
         for k, obj in enumerate(geometry.geometryObjects):
@@ -390,67 +479,66 @@ def test_mesh_box_check_finds_what_a_brute_force_check_finds(talos):
                 coal.CollisionRequest(),
                 res,
             )
-        assert value == brute
+        assert (value > TOL_PENETRATION) == (brute > 0)  # the deepest hit, or 0 for none
         seen += brute > 0
     assert 0 < seen < 25  # boxes both touching and missing the robot were drawn
 
 
 def test_broad_phase_of_the_self_pairs_keeps_every_close_pair(talos):
-    """self_distances_within: exact for the pairs it computes, and every pair it skips is at
-    least ``within`` apart (random postures, several thresholds)."""
-    from posturegen.collision import self_distances
-
+    """close_pairs: exact distances, and exactly the candidate pairs closer than each joint
+    pair's slack (random postures, several slacks), against all pairs computed."""
     pm = proxy_model(talos)
-    for model, data in _random_postures(talos, 4, 5):
+    every = np.arange(len(pm.self_pairs))
+    for model, data in _random_postures(talos, 4, 3):
         centers = pm.centers_world(model, data)
-        exact = self_distances(pm, centers, pm.self_pairs)
+        exact = pm.distances(centers, every)
         for within in (0.0, 0.06, 0.3):
-            d = pm.self_distances_within(centers, within)
-            computed = np.isfinite(d)
-            np.testing.assert_allclose(d[computed], exact[computed], atol=1e-12)
-            assert np.all(exact[~computed] >= within)
-            assert (exact < within).sum() <= computed.sum() < len(d)  # it does skip some
-            subset = np.arange(0, len(d), 7)
-            np.testing.assert_array_equal(
-                pm.self_distances_within(centers, within, subset), d[subset]
-            )
+            slack = np.full(len(pm.joint_pairs), within)
+            idx, d = pm.close_pairs(centers, slack)
+            np.testing.assert_allclose(d, exact[idx], atol=1e-12)
+            np.testing.assert_array_equal(np.sort(idx), np.flatnonzero(exact < within))
+        links = np.arange(0, len(pm.joint_pairs), 3)
+        idx, _ = pm.close_pairs(centers, np.full(len(pm.joint_pairs), 0.3), links)
+        assert np.isin(pm.pair_link[idx], links).all()
 
 
 def test_the_separated_start_parts_pressed_pairs_and_keeps_the_supports(talos):
-    """In half-sitting Talos' forearms nearly touch its thighs (4 mm above the margin): the
-    first start moves the joints that carry no contact until those pairs are about
-    SEPARATION above the margin, and leaves the legs (they carry the feet) alone."""
-    from posturegen.collision import SEPARATION, self_distances, separated_start
+    """In half-sitting Talos' arms nearly touch its torso and thighs: the first start moves
+    the joints that carry no contact until each pair of links is about SEPARATION beyond its
+    clearance, and leaves the legs (they carry the feet) alone."""
+    from posturegen.collision import SEPARATION, separated_start
 
     pm = proxy_model(talos)
     model = talos.model
     feet = [talos.patches[n].joint_id for n in ("left_sole", "right_sole")]
     margin = 0.01
-    candidates = np.arange(len(pm.self_pairs))
-    qj = separated_start(talos, pm, candidates, margin, talos.q_init, feet)
+    links = np.arange(len(pm.joint_pairs))
+    qj = separated_start(talos, pm, links, margin, talos.q_init, feet)
+    target = pm.pair_clearance(margin) + SEPARATION
 
-    def closest(q):
+    def shortfall(q):
+        """(P,) how far each joint pair's closest proxies are below its target [m]."""
         data = model.createData()
         pin.forwardKinematics(model, data, q)
-        return self_distances(pm, pm.centers_world(model, data), pm.self_pairs)
+        d = pm.distances(pm.centers_world(model, data), np.arange(len(pm.self_pairs)))
+        closest = np.full(len(pm.joint_pairs), np.inf)
+        np.minimum.at(closest, pm.pair_link, d)
+        return target - closest
 
     q = talos.q_init.copy()
     q[7:] = qj
-    before, after = closest(talos.q_init), closest(q)
+    before, after = shortfall(talos.q_init), shortfall(q)
     legs = [i for i, n in enumerate(talos.joint_names) if n.startswith("leg_")]
     np.testing.assert_array_equal(qj[legs], talos.q_init[7:][legs])
     assert np.all((talos.q_lower <= qj) & (qj <= talos.q_upper))
-    arms = np.array(
-        [
-            "arm" in model.names[pm.spheres[i].joint_id]
-            or "arm" in model.names[pm.spheres[j].joint_id]
-            for i, j in pm.self_pairs
-        ]
-    )
-    assert before[arms].min() < margin + 0.005  # pressed at the start
-    assert after[arms].min() >= margin + 0.8 * SEPARATION  # parted
+    arms = np.array(["arm" in model.names[a] or "arm" in model.names[b] for a, b in pm.joint_pairs])
+    assert before[arms].max() > 0.5 * SEPARATION  # pressed at the start
+    assert after[arms].max() <= 0.2 * SEPARATION  # parted
     # pairs the free joints cannot move (the two legs) keep their distance
-    np.testing.assert_allclose(after[~arms].min(), before[~arms].min(), atol=1e-9)
+    legs_only = np.array(
+        ["leg" in model.names[a] and "leg" in model.names[b] for a, b in pm.joint_pairs]
+    )
+    np.testing.assert_allclose(after[legs_only], before[legs_only], atol=1e-9)
 
 
 def test_collision_runs_start_ipopt_with_their_barrier_and_regularization(monkeypatch):

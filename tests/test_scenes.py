@@ -14,6 +14,7 @@ from posturegen.robot import load_robot, shipped_models_dir
 from posturegen.sequence import run_sequence, stage_problem_dict
 from posturegen.spec import problem_from_dict
 from posturegen.verify import verify_file
+from tests.conftest import brute_force_intersections
 
 
 def _two_stage() -> dict:
@@ -190,9 +191,10 @@ def test_inclined_ladder_lifts_the_left_foot_before_placing_it() -> None:
 SCENE_RUNS = sorted(
     {(name, info.robot) for name, info in scenes.SCENES.items()}
     | {(name, "talos") for name in scenes.SCENES}
+    | {("stand-reach", robot) for robot in scenes.ROBOT_NAMES}
 )
 VERIFIED = {
-    ("stand-reach", "talos"),
+    *(("stand-reach", robot) for robot in scenes.ROBOT_NAMES),
     ("wall-brace", "talos"),
     ("stairs", "talos"),
     ("stairs", "atlas"),
@@ -213,6 +215,8 @@ def test_scene_demo_writes_only_verified_postures(name: str, robot: str, tmp_pat
     for stage in index["stages"]:
         if stage["success"]:  # a stage said verified: the file must pass verify, meshes too
             assert verify_file(tmp_path / stage["posture"]).ok, stage["name"]
+            posture = json.loads((tmp_path / stage["posture"]).read_text())
+            assert brute_force_intersections(posture) == [], stage["name"]
     assert all(s["success"] for s in index["stages"][:-1])  # a failure ends the sequence
     if rc == 1:  # and says why, from the relaxed problems it solved
         assert index["stages"][-1]["diagnosis"]
@@ -222,10 +226,10 @@ def test_scene_demo_writes_only_verified_postures(name: str, robot: str, tmp_pat
 
 
 # the shipped climbs (issue 5): stairs >= 4 steps on ATLAS, the vertical ladder on HRP-2 with
-# each foot two rungs above the demo's (ending on rungs 3 and 4); every stage verified
+# each foot four rungs above the demo's (ending on rungs 5 and 6); every stage verified
 CLIMBS = [
     ("stairs", "atlas", 4, "left foot on step 4"),
-    ("ladder-vertical", "hrp2", 1, "left foot on rung 4"),
+    ("ladder-vertical", "hrp2", 2, "left foot on rung 6"),
 ]
 
 
@@ -242,3 +246,5 @@ def test_climb_verifies_every_stage(
     assert index["stages"][-1]["name"] == last
     for stage in index["stages"]:
         assert verify_file(tmp_path / stage["posture"]).ok, stage["name"]
+        posture = json.loads((tmp_path / stage["posture"]).read_text())
+        assert brute_force_intersections(posture) == [], stage["name"]

@@ -1,10 +1,10 @@
 """Collision avoidance (paper eq. 1, rows 3-4) with smooth conservative sphere proxies.
 
-Proxies: each joint's collision geometry (all meshes and primitives rigidly attached to it) is
-covered by 1-16 spheres of radius <= 10 cm (up to 40 of radius <= 3 cm on links carrying a
-sole patch), k-means
-clusters of its vertices, each radius the farthest vertex of its cluster; every vertex of
-every mesh lies in a sphere (tested). They are fitted once per robot and cached on disk.
+Proxies (:mod:`posturegen.proxies`, fitted by :mod:`posturegen.proxy_fit`): each joint's
+collision geometry is covered by spheres that contain its whole surface and stand at most
+1 cm outside it; the candidate self pairs are every pair of links that the pair rule
+(:mod:`posturegen.pairs`) leaves checked, each held at least min(margin, its clearance at the
+reference posture) apart.
 
 Distances, as smooth CasADi expressions:
 
@@ -17,385 +17,42 @@ Distances, as smooth CasADi expressions:
   Hence capsule-box and mesh-box care are avoided.
 
 Self rows are one per pair of limbs (the kinematic chains between branchings): a smooth
-minimum (-LSE, SOFT_MIN_BETA) of their sphere pairs' distances, computed in the base frame.
+minimum (-LSE, SOFT_MIN_BETA) of their sphere pairs' distances minus each pair's clearance,
+computed in the base frame.
 
 The rows bring their own exact Jacobian and Hessian (:func:`_soft_min_rows`, through the
 links' twist Jacobians; tested equal to CasADi's): CasADi's automatic Hessian redoes each sphere
 pair's work once per colour of its columns, and was two thirds of Talos' Hessian of the
 Lagrangian with 150 self pairs.
 
-Rows are kept few by an active set: only the pairs closer than ``activation`` (self pairs;
-``environment_activation`` for sphere-box pairs) at the current
-posture enter the program; after a solve every candidate pair is checked and the violated ones
-are added before solving again (:func:`posturegen.solve.solve`). Candidates exclude pairs of one
-joint, parent-child joints, the SRDF's disabled pairs, the user's exclusions, and pairs whose
-proxies already overlap at the robot's reference posture.
+Rows are kept few by an active set: of the pairs closer than ``activation`` beyond their
+clearance (self pairs; ``environment_activation`` beyond the margin for sphere-box pairs) at
+the current posture, the ACTIVE_PER_LINK closest of each pair of links enter the program;
+after a solve every candidate pair is checked and the violated ones are added (as many per
+pair of links) before solving again (:func:`posturegen.solve.solve`).
 """
 
 from __future__ import annotations
 
 import hashlib
-import json
-import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import casadi as ca
-import coal
 import numpy as np
 import pinocchio as pin
 
-from .errors import InputError, ModelError
+from .errors import InputError
 from .kinematics import skew
 from .problem import BlockDerivatives, BuildContext, Problem, Term
+from .proxies import ProxyModel, joint_pair_index, proxy_model
+from .proxy_fit import Sphere
 from .robot import Robot
-from .verify import adjacent_joints
 
-PROXY_VERSION = 5
+__all__ = ["ProxyModel", "Sphere", "proxy_model"]
+
 BETA = 300.0  # [1/m] sharpness of the smooth max over box faces
-MAX_SPHERES_SOLE = 40
-SOLE_SPHERE_RADIUS = 0.03  # [m] largest proxy radius on a link carrying a sole patch
-# every other link: spheres of at most 10 cm, up to 16 of them (the HRP-2 chest had 5 spheres
-# of 19 cm, which bulged 10 cm past its box-shaped mesh and kept it off a ladder)
-MAX_SPHERE_RADIUS = 0.10  # [m]
-MAX_SPHERES = 16
-CYLINDER_SIDES = 16
-REFERENCE_GAP = 0.01  # [m] link pairs this close at the reference posture are not avoided
-
-
-def cache_dir() -> Path:
-    """Where fitted proxies are cached: $POSTUREGEN_CACHE, else ~/.cache/posturegen."""
-    root = os.environ.get("POSTUREGEN_CACHE") or Path.home() / ".cache" / "posturegen"
-    return Path(root) / "proxies"
-
-
-@dataclass(frozen=True)
-class Sphere:
-    """A proxy sphere: centre in its joint's frame [m], radius [m]."""
-
-    joint_id: int
-    center: np.ndarray  # (3,)
-    radius: float
-
-
-def geometry_points(obj: pin.GeometryObject) -> np.ndarray:
-    """Points (k, 3) in the parent joint's frame whose convex hull contains the geometry."""
-    g = obj.geometry
-    if isinstance(g, coal.BVHModelBase):
-        local = np.asarray(g.vertices(), dtype=float)
-    elif isinstance(g, coal.Box):
-        h = np.asarray(g.halfSide, dtype=float)
-        local = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * h
-    elif isinstance(g, coal.Cylinder | coal.Capsule | coal.Cone):
-        # a polygon circumscribing each end circle (radius / cos(π/n)) keeps the hull outside
-        r = g.radius / np.cos(np.pi / CYLINDER_SIDES)
-        t = np.linspace(0, 2 * np.pi, CYLINDER_SIDES, endpoint=False)
-        ring = np.c_[r * np.cos(t), r * np.sin(t)]
-        z = g.halfLength + (g.radius if isinstance(g, coal.Capsule) else 0.0)
-        local = np.vstack([np.c_[ring, np.full(len(t), -z)], np.c_[ring, np.full(len(t), z)]])
-    elif isinstance(g, coal.Sphere):
-        r = g.radius
-        local = np.vstack([np.eye(3) * r, -np.eye(3) * r]) * np.sqrt(3)  # octahedron ⊃ ball
-    else:
-        raise ModelError(f"collision geometry '{obj.name}' has unsupported type {type(g).__name__}")
-    M = obj.placement
-    return local @ np.asarray(M.rotation).T + np.asarray(M.translation)
-
-
-def fit_spheres(
-    points: np.ndarray, max_spheres: int = MAX_SPHERES, max_radius: float = MAX_SPHERE_RADIUS
-) -> list[tuple[np.ndarray, float]]:
-    """Spheres that contain every point of ``points`` (k, 3): k-means clusters (farthest-point
-    seeding, 12 Lloyd steps), each radius the farthest point of its cluster. k grows from 1
-    until the largest radius is at most 0.6× the body's smallest principal extent (a sphere
-    then barely bulges past the body) and at most ``max_radius``, or k = max_spheres."""
-    mean = points.mean(axis=0)
-    _, _, vt = np.linalg.svd(points - mean, full_matrices=False)
-    extents = np.ptp((points - mean) @ vt.T, axis=0)
-    target = min(max(0.6 * float(extents.min()), 0.02), max_radius)
-    best: list[tuple[np.ndarray, float]] = []
-    for k in range(1, max_spheres + 1):
-        centers = _farthest_points(points, k)
-        for _ in range(12):
-            owner = np.argmin(np.linalg.norm(points[:, None] - centers[None], axis=2), axis=1)
-            centers = np.array(
-                [
-                    points[owner == i].mean(axis=0) if np.any(owner == i) else centers[i]
-                    for i in range(k)
-                ]
-            )
-        d = np.linalg.norm(points[:, None] - centers[None], axis=2)
-        owner = np.argmin(d, axis=1)
-        best = [
-            (centers[i], float(d[owner == i, i].max()) + 1e-6)
-            for i in range(k)
-            if np.any(owner == i)
-        ]
-        if max(r for _, r in best) <= target:
-            break
-    return best
-
-
-def _farthest_points(points: np.ndarray, k: int) -> np.ndarray:
-    """k seeds: the point farthest from the mean, then each farthest from those chosen."""
-    chosen = [points[int(np.argmax(np.linalg.norm(points - points.mean(axis=0), axis=1)))]]
-    dist = np.linalg.norm(points - chosen[0], axis=1)
-    while len(chosen) < k:
-        chosen.append(points[int(np.argmax(dist))])
-        dist = np.minimum(dist, np.linalg.norm(points - chosen[-1], axis=1))
-    if k == 1:
-        return points.mean(axis=0)[None]
-    return np.array(chosen)
-
-
-@dataclass
-class ProxyModel:
-    """Sphere proxies of a robot and its candidate self-collision pairs."""
-
-    spheres: list[Sphere]
-    # candidate sphere pairs (i, j), i < j, for self-collision
-    self_pairs: np.ndarray  # (n, 2) int
-    excluded_joint_pairs: list[tuple[str, str]] = field(default_factory=list)
-    # (njoints,) limb of each joint (see limbs()); None: every joint its own limb
-    limb: np.ndarray | None = None
-
-    def __post_init__(self) -> None:
-        self._joint = np.array([s.joint_id for s in self.spheres], dtype=int)  # (S,)
-        self._local = np.array([s.center for s in self.spheres]).reshape(-1, 3)  # (S, 3)
-        self._radii = np.array([s.radius for s in self.spheres])  # (S,)
-        self._joints = np.unique(self._joint)  # the joints that carry spheres
-        self._joint_list = [int(j) for j in self._joints]
-        # broad phase of the self pairs: per joint, a sphere around its proxies (centred on the
-        # mean of their centres, so its world centre is the mean of theirs); per candidate
-        # pair, the index of its pair of joints
-        n = int(self._joint.max(initial=0)) + 1
-        self._count = np.maximum(np.bincount(self._joint, minlength=n), 1)  # (n,)
-        # (n, S): the mean of each joint's sphere centres as a matrix product
-        self._mean = np.zeros((n, len(self.spheres)))
-        self._mean[self._joint, np.arange(len(self.spheres))] = 1.0 / self._count[self._joint]
-        mean = self._mean @ self._local
-        self._bound_radius = np.zeros(n)
-        np.maximum.at(
-            self._bound_radius,
-            self._joint,
-            np.linalg.norm(self._local - mean[self._joint], axis=1) + self._radii,
-        )
-        ja, jb = self._joint[self.self_pairs[:, 0]], self._joint[self.self_pairs[:, 1]]
-        keys = np.minimum(ja, jb) * n + np.maximum(ja, jb)
-        links, self._pair_link = np.unique(keys, return_inverse=True)
-        self._link_a, self._link_b = links // n, links % n
-        # the pairs of each pair of joints, contiguous: _by_link[_link_start[l]:_link_start[l+1]]
-        pairs = np.asarray(self.self_pairs, dtype=int).reshape(-1, 2)
-        self._pair_i, self._pair_j = (
-            np.ascontiguousarray(pairs[:, 0]),
-            np.ascontiguousarray(pairs[:, 1]),
-        )
-        self._pair_r = self._radii[self._pair_i] + self._radii[self._pair_j]  # r_i + r_j
-        self._by_link = np.argsort(self._pair_link, kind="stable")
-        self._link_start = np.searchsorted(
-            self._pair_link[self._by_link], np.arange(len(links) + 1)
-        )
-
-    def centers_world(self, model: pin.Model, data: pin.Data) -> np.ndarray:
-        """(S, 3) sphere centres in world for the placements already in ``data.oMi``:
-        c_world = R_j·c + p_j of each sphere's joint j."""
-        T = np.zeros((model.njoints, 4, 4))
-        oMi = data.oMi
-        T[self._joints] = [oMi[j].homogeneous for j in self._joint_list]
-        T = T[self._joint]  # (S, 4, 4)
-        return np.einsum("sij,sj->si", T[:, :3, :3], self._local) + T[:, :3, 3]
-
-    def self_distances_within(
-        self, centers: np.ndarray, within: float, subset: np.ndarray | None = None
-    ) -> np.ndarray:
-        """Distances [m] of the candidate self pairs (``self_pairs``, or those of the indices
-        ``subset``) that may be closer than ``within``, for the sphere centres ``centers``
-        (S, 3) in world; +inf for the others: those whose joints' bounding spheres are farther
-        apart than ``within`` (a lower bound of every distance between their proxies) are not
-        computed (Talos: 20,528 pairs, about 0.7 ms; with the broad phase 0.1-0.2 ms)."""
-        b = self._mean @ centers  # the bounding spheres' world centres
-        gap = np.linalg.norm(b[self._link_a] - b[self._link_b], axis=1)
-        gap -= self._bound_radius[self._link_a] + self._bound_radius[self._link_b]
-        k = np.flatnonzero(gap < within)  # the joint pairs that pass
-        first, count = self._link_start[k], np.diff(self._link_start)[k]
-        # their sphere pairs: the runs _by_link[first:first + count], gathered at once
-        run_start = np.cumsum(count) - count
-        pairs = self._by_link[np.arange(count.sum()) + np.repeat(first - run_start, count)]
-        out = np.full(len(self.self_pairs), np.inf)
-        u = centers[self._pair_i[pairs]] - centers[self._pair_j[pairs]]
-        out[pairs] = np.sqrt(np.einsum("ij,ij->i", u, u)) - self._pair_r[pairs]
-        if subset is None or len(subset) == len(self.self_pairs):  # subset: sorted indices
-            return out
-        return out[subset]
-
-    @property
-    def radii(self) -> np.ndarray:
-        """(S,) radii [m]."""
-        return self._radii
-
-    @property
-    def joint_ids(self) -> np.ndarray:
-        """(S,) each sphere's joint."""
-        return self._joint
-
-
-def _urdf_key(robot: Robot) -> str:
-    h = hashlib.sha1()
-    h.update(
-        f"v{PROXY_VERSION}/{MAX_SPHERES}/{MAX_SPHERES_SOLE}/{SOLE_SPHERE_RADIUS}"
-        f"/{MAX_SPHERE_RADIUS}".encode()
-    )
-    h.update(
-        repr(
-            sorted((p.frame, p.T_frame_patch.homogeneous.tobytes()) for p in robot.patches.values())
-        ).encode()
-    )
-    for path in (robot.urdf, robot.srdf):
-        if path is not None:
-            h.update(Path(path).read_bytes())
-    return h.hexdigest()[:16]
-
-
-def _fit(robot: Robot) -> list[Sphere]:
-    gm = robot.collision_model()
-    per_joint: dict[int, list[np.ndarray]] = {}
-    for obj in gm.geometryObjects:
-        per_joint.setdefault(int(obj.parentJoint), []).append(geometry_points(obj))
-    # feet stand on the scene: finer proxies keep the spheres from bulging far past the sole
-    # (Talos: 7.7 -> 1.9 cm below it), so a foot can stand next to a riser. On the hands they
-    # made the box test infeasible (36 small spheres on the Talos wrist), so soles only.
-    sole_joints = {p.joint_id for n, p in robot.patches.items() if n.endswith("sole")}
-    spheres = []
-    for jid, pts in sorted(per_joint.items()):
-        if jid in sole_joints:
-            fitted = fit_spheres(np.vstack(pts), MAX_SPHERES_SOLE, SOLE_SPHERE_RADIUS)
-        else:
-            fitted = fit_spheres(np.vstack(pts))
-        for c, r in fitted:
-            spheres.append(Sphere(jid, c, r))
-    return spheres
-
-
-def _joint_pairs(gm: pin.GeometryModel) -> set[tuple[int, int]]:
-    """Sorted parent-joint pairs of a geometry model's collision pairs."""
-    out = set()
-    for p in gm.collisionPairs:
-        a = int(gm.geometryObjects[p.first].parentJoint)
-        b = int(gm.geometryObjects[p.second].parentJoint)
-        out.add((min(a, b), max(a, b)))
-    return out
-
-
-def _disabled_joint_pairs(robot: Robot) -> set[tuple[int, int]]:
-    """Joint pairs with no collision pair left after the SRDF's disabled pairs."""
-    if robot.srdf is None:
-        return set()
-    gm = robot.collision_model().copy()
-    gm.addAllCollisionPairs()
-    all_pairs = _joint_pairs(gm)
-    pin.removeCollisionPairs(robot.model, gm, str(robot.srdf), False)
-    return all_pairs - _joint_pairs(gm)
-
-
-def _meshes_overlapping(robot: Robot, data: pin.Data) -> set[tuple[int, int]]:
-    """Joint pairs (sorted ids, neither the same nor parent and child) whose collision
-    meshes overlap at the reference posture (``data`` holds its kinematics). They cannot be
-    told apart by any posture near it (ATLAS: the pelvis and the glutes' convex hulls), so,
-    like an SRDF's 'Default' pairs, they are not checked."""
-    model = robot.model
-    gm = robot.collision_model().copy()
-    gm.addAllCollisionPairs()
-    gd = gm.createData()
-    pin.updateGeometryPlacements(model, data, gm, gd)
-    pin.computeCollisions(gm, gd, False)
-    out = set()
-    for cp, res in zip(gm.collisionPairs, gd.collisionResults, strict=True):
-        a = int(gm.geometryObjects[cp.first].parentJoint)
-        b = int(gm.geometryObjects[cp.second].parentJoint)
-        if not adjacent_joints(model, a, b) and res.isCollision():
-            out.add((min(a, b), max(a, b)))
-    return out
-
-
-def proxy_model(robot: Robot) -> ProxyModel:
-    """The robot's proxies and candidate pairs (fitted once, cached on disk and in memory)."""
-    cached = robot._proxy_model
-    if cached is not None:
-        return cached
-    path = cache_dir() / f"{_urdf_key(robot)}.json"
-    spheres: list[Sphere] | None = None
-    if path.is_file():
-        try:
-            raw = json.loads(path.read_text())
-            spheres = [
-                Sphere(int(s["joint"]), np.array(s["center"]), float(s["radius"]))
-                for s in raw["spheres"]
-            ]
-        except (OSError, ValueError, KeyError, TypeError):
-            spheres = None
-    if spheres is None:
-        spheres = _fit(robot)
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_text(
-                json.dumps(
-                    {
-                        "version": PROXY_VERSION,
-                        "spheres": [
-                            {"joint": s.joint_id, "center": s.center.tolist(), "radius": s.radius}
-                            for s in spheres
-                        ],
-                    }
-                )
-            )
-        except OSError:
-            pass  # a read-only home: fit again next time
-    model = robot.model
-    disabled = _disabled_joint_pairs(robot)
-    # proxies closer than the default margin at the reference posture (the G1 wrist and its
-    # fingers) cannot keep the margin near it: disable those pairs
-    data = model.createData()
-    pin.forwardKinematics(model, data, robot.q_init)
-    centers = np.array([data.oMi[s.joint_id].act(s.center) for s in spheres])
-    radii = np.array([s.radius for s in spheres])
-    overlapping: set[tuple[int, int]] = set()
-    pairs = []
-    for i in range(len(spheres)):
-        for j in range(i + 1, len(spheres)):
-            a, b = spheres[i].joint_id, spheres[j].joint_id
-            key = (min(a, b), max(a, b))
-            if adjacent_joints(model, a, b) or key in disabled:
-                continue
-            if np.linalg.norm(centers[i] - centers[j]) - radii[i] - radii[j] < REFERENCE_GAP:
-                overlapping.add(key)
-            pairs.append((i, j))
-    pairs = [
-        (i, j)
-        for i, j in pairs
-        if (
-            min(spheres[i].joint_id, spheres[j].joint_id),
-            max(spheres[i].joint_id, spheres[j].joint_id),
-        )
-        not in overlapping
-    ]
-    overlapping |= _meshes_overlapping(robot, data) - disabled
-    excluded = sorted((model.names[a], model.names[b]) for a, b in overlapping)
-    pm = ProxyModel(spheres, np.array(pairs, dtype=int).reshape(-1, 2), excluded, limbs(model))
-    robot._proxy_model = pm
-    return pm
-
-
-def limbs(model: pin.Model) -> np.ndarray:
-    """(njoints,) the limb of each joint: the first joint of its chain below the nearest
-    branching of the kinematic tree (Talos: the pelvis, torso, head, each arm and each leg)."""
-    children = np.bincount(np.asarray(model.parents[1:], dtype=int), minlength=model.njoints)
-    out = np.arange(model.njoints)
-    for j in range(2, model.njoints):
-        parent = int(model.parents[j])
-        out[j] = out[parent] if children[parent] < 2 and parent > 0 else j
-    return out
 
 
 # --------------------------------------------------------------------------- options and boxes
@@ -484,13 +141,6 @@ def _joint_of(robot: Robot, name: str) -> int:
 
 
 # --------------------------------------------------------------------------- distances (numpy)
-def self_distances(pm: ProxyModel, centers: np.ndarray, pairs: np.ndarray) -> np.ndarray:
-    """Proxy distances |c_i - c_j| - r_i - r_j [m] of sphere pairs (n, 2)."""
-    r = pm.radii
-    d = centers[pairs[:, 0]] - centers[pairs[:, 1]]
-    return np.linalg.norm(d, axis=1) - r[pairs[:, 0]] - r[pairs[:, 1]]
-
-
 def box_distances(pm: ProxyModel, centers: np.ndarray, boxes: list[EnvBox]) -> np.ndarray:
     """(S, B) conservative distances max_k s_k - r of every sphere to every box [m]."""
     out = np.empty((len(centers), len(boxes)))
@@ -501,22 +151,25 @@ def box_distances(pm: ProxyModel, centers: np.ndarray, boxes: list[EnvBox]) -> n
 
 
 # --------------------------------------------------------------------------- the first start
-SEPARATION = 0.03  # [m] how far above the margin the first start puts the closest self pairs
+SEPARATION = 0.03  # [m] how far above its clearance the first start puts each close pair
+SEPARATED_PER_LINK = 2  # the closest sphere pairs of each joint pair that the start parts
 
 
 def separated_start(
     robot: Robot,
     pm: ProxyModel,
-    candidates: np.ndarray,
+    links: np.ndarray,
     margin: float,
     q: np.ndarray,
     contact_joints: list[int],
 ) -> np.ndarray:
-    """Joints (nj,) of q moved so that the candidate self pairs (indices into
-    ``pm.self_pairs``) closer than margin + SEPARATION are about that far apart: three damped
-    least-norm steps Δq = Aᵀ(AAᵀ + 1e-4·I)⁻¹ b over the joints that carry no contact (the
-    chains from the base to ``contact_joints`` stay), A the pairs' distance gradients
-    n·(J_a - J_b), b their shortfalls; clipped to the joint limits.
+    """Joints (nj,) of q moved so that the candidate joint pairs ``links`` (indices into
+    ``pm.joint_pairs``) closer than their clearance (:meth:`ProxyModel.pair_clearance`) +
+    SEPARATION are about that far apart: three damped least-norm steps
+    Δq = Aᵀ(AAᵀ + 1e-4·I)⁻¹ b over the joints that carry no contact (the chains from the
+    base to ``contact_joints`` stay), A the distance gradients n·(J_a - J_b) of each joint
+    pair's SEPARATED_PER_LINK closest sphere pairs, b their shortfalls; clipped to the joint
+    limits.
 
     IPOPT starts there instead of at q (the posture cost still pulls towards q). In
     half-sitting Talos' forearms are 4 mm above the 1 cm margin from its thighs, and the first
@@ -528,7 +181,7 @@ def separated_start(
         np.asarray(q, dtype=float).tobytes(),
         margin,
         tuple(contact_joints),
-        hashlib.sha1(np.asarray(candidates).tobytes()).digest(),
+        hashlib.sha1(np.asarray(links).tobytes()).digest(),
     )
     hit = _SEPARATED.get(key)
     if hit is not None:
@@ -544,33 +197,23 @@ def separated_start(
     movable = np.array([model.joints[j].idx_v for j in free], dtype=int)  # velocity indices
     movable_q = np.array([model.joints[j].idx_q for j in free], dtype=int)
     q = np.array(q, dtype=float)
-    if movable.size == 0 or len(candidates) == 0:
+    if movable.size == 0 or len(links) == 0:
         return q[7:]  # nothing to part: not worth a cache entry
-    is_candidate = np.zeros(len(pm.self_pairs), dtype=bool)
-    is_candidate[candidates] = True
-    pairs = pm.self_pairs
+    target = pm.pair_clearance(margin) + SEPARATION  # (P,)
     for _ in range(3):
         pin.forwardKinematics(model, data, q)
         centers = pm.centers_world(model, data)
-        d = pm.self_distances_within(centers, margin + SEPARATION)
-        near = np.flatnonzero(is_candidate & (d < margin + SEPARATION))
+        near, d = pm.close_pairs(centers, target, links)
+        near = pm.closest(near, d, SEPARATED_PER_LINK)
         if near.size == 0:
             break
         pin.computeJointJacobians(model, data, q)
         rows, short = [], []
-        for k in near:
-            i, j = pairs[k]
-            n = centers[i] - centers[j]
-            n /= max(float(np.linalg.norm(n)), 1e-12)
-            grad = np.zeros(model.nv)
-            for s, sign in ((i, 1.0), (j, -1.0)):
-                jid = pm.spheres[s].joint_id
-                J = pin.getJointJacobian(model, data, jid, pin.LOCAL_WORLD_ALIGNED)
-                lever = centers[s] - data.oMi[jid].translation
-                grad += sign * (n @ (J[:3] - pin.skew(lever) @ J[3:]))
+        for k, dk in zip(near, pm.distances(centers, near), strict=True):
+            grad = _pair_gradient(model, data, pm, centers, pm.self_pairs[k])
             if np.linalg.norm(grad[movable]) > 1e-6:  # pairs the free joints can part
                 rows.append(grad[movable])
-                short.append(margin + SEPARATION - d[k])
+                short.append(target[pm.pair_link[k]] - dk)
         if not rows:
             break
         A, b = np.array(rows), np.array(short)
@@ -583,7 +226,24 @@ def separated_start(
     return q[7:]
 
 
-# separated starts per (model, q, margin, contacts, candidates): a planner's queries share them
+def _pair_gradient(
+    model: pin.Model, data: pin.Data, pm: ProxyModel, centers: np.ndarray, pair: np.ndarray
+) -> np.ndarray:
+    """(nv,) the gradient of |c_i - c_j| - r_i - r_j: n·(J_i - J_j), n the unit vector from
+    c_j to c_i, J the sphere centres' Jacobians (joint Jacobians already in ``data``)."""
+    i, j = (int(v) for v in pair)
+    n = centers[i] - centers[j]
+    n /= max(float(np.linalg.norm(n)), 1e-12)
+    grad = np.zeros(model.nv)
+    for s, sign in ((i, 1.0), (j, -1.0)):
+        jid = pm.spheres[s].joint_id
+        J = pin.getJointJacobian(model, data, jid, pin.LOCAL_WORLD_ALIGNED)
+        lever = centers[s] - data.oMi[jid].translation
+        grad += sign * (n @ (J[:3] - pin.skew(lever) @ J[3:]))
+    return grad
+
+
+# separated starts per (model, q, margin, contacts, links): a planner's queries share them
 _SEPARATED: dict[tuple[Any, ...], np.ndarray] = {}
 
 
@@ -591,7 +251,7 @@ _SEPARATED: dict[tuple[Any, ...], np.ndarray] = {}
 # [1/m] sharpness of the smooth minimum over a link pair's sphere pairs: conservative by at most
 # log(n)/β (n sphere pairs, 1.5 cm for 20), by much less when one pair is the closest by a few
 # mm. 200 /m: talos-near-body-collision took 26.5 median iterations, 500 /m 28.5, 1000 /m 32.5.
-SOFT_MIN_BETA = 200.0
+SOFT_MIN_BETA = 1000.0
 # [m] a sphere-box row is saturated at margin + this: -LSE(-d, -(margin + s)) >= margin, which
 # still implies d >= margin (a smooth minimum is below each of its arguments) and is constant
 # once the sphere is a few cm away. IPOPT writes an inequality row as g(x) - s = 0 with a slack
@@ -601,6 +261,15 @@ SOFT_MIN_BETA = 200.0
 # left unsaturated: the far ones' barrier keeps the arm off the body on its way, and saturated
 # at 5 or 10 cm talos-near-body-collision took 1-2 more median iterations.
 ENV_SATURATION = 0.05
+# the closest sphere pairs of each pair of links (and spheres of each link near each box) that
+# enter the program in one active-set round: proxies fitted to 1 cm put thousands of sphere
+# pairs within reach of each other (Talos' legs at half-sitting: 4,000 within 6 cm)
+ACTIVE_PER_LINK = 4
+
+
+def _joints(a: Sphere, b: Sphere) -> tuple[int, int]:
+    """The sorted joint ids of two spheres."""
+    return (a.joint_id, b.joint_id) if a.joint_id <= b.joint_id else (b.joint_id, a.joint_id)
 
 
 def _center(state: Any, sphere: Sphere) -> Any:
@@ -619,13 +288,15 @@ class _Element:
     curvature: dict[tuple[int, int], Any] = field(default_factory=dict)
 
 
-def _pair_element(c: dict[int, Any], r: np.ndarray, i: int, j: int) -> _Element:
-    """v = |c_i - c_j| - r_i - r_j: ∇v = (n, -n), ∇²_u v = (I - nnᵀ)/|u| for u = c_i - c_j."""
+def _pair_element(c: dict[int, Any], r: np.ndarray, i: int, j: int, clearance: Any) -> _Element:
+    """v = |c_i - c_j| - r_i - r_j - m (m the pair's clearance, a parameter): ∇v = (n, -n),
+    ∇²_u v = (I - nnᵀ)/|u| for u = c_i - c_j."""
     u = c[i] - c[j]
     length = ca.sqrt(ca.dot(u, u) + 1e-12)
     n = u / length
     K = (ca.SX.eye(3) - n @ n.T) / length - SOFT_MIN_BETA * (n @ n.T)
-    return _Element(length - r[i] - r[j], {i: n, j: -n}, {(i, i): K, (j, j): K, (i, j): -K})
+    value = length - r[i] - r[j] - clearance
+    return _Element(value, {i: n, j: -n}, {(i, i): K, (j, j): K, (i, j): -K})
 
 
 def _box_element(c: Any, i: int, box: Any, radius: float) -> _Element:
@@ -800,10 +471,22 @@ class CollisionTerm(Term):
             local = ctx.kin.forward(ca.SX.zeros(3), ca.SX.eye(3), ctx.joints)
             used = sorted({i for p in self.self_pairs for i in p})
             c = {i: _center(local, spheres[i]) for i in used}
+            index = joint_pair_index(self.pm)
+            clearance = self.pm.clearance
             rows = [
-                [_pair_element(c, r, i, j) for i, j in members] for _, members in self.self_groups()
+                [
+                    _pair_element(
+                        c,
+                        r,
+                        i,
+                        j,
+                        ca.fmin(margin, clearance[index[_joints(spheres[i], spheres[j])]]),
+                    )
+                    for i, j in members
+                ]
+                for _, members in self.self_groups()
             ]
-            value, deriv = _soft_min_rows(ctx, local, spheres, rows, margin, None)
+            value, deriv = _soft_min_rows(ctx, local, spheres, rows, 0.0, None)
             nlp.constrain("collision.self", value, 0.0, np.inf, deriv)
         if self.env_pairs:
             B = ca.reshape(

@@ -16,8 +16,17 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from .active_set import ActiveSet
+from .collision import (
+    CollisionTerm,
+    env_boxes,
+    excluded_joint_ids,
+    proxy_model,
+    separated_start,
+)
 from .kinematics import scratch_data
-from .problem import _CACHE, Problem
+from .pairs import pair_rule, unchecked_entries
+from .problem import _CACHE, Problem, SolverOptions
 from .verify import SCHEMA, VerifyReport, verify_posture
 
 _IPOPT_OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
@@ -234,155 +243,115 @@ def _solve_avoiding(
 ) -> tuple[Result, list[_Run]]:
     """The active-set loop of :func:`solve` from ``x0``; ``prior`` runs count in the
     Result's iterations and times. Returns the Result and every run so far."""
-    runs: list[_Run] = []
     opts = problem.collision_options
-    from .collision import (
-        CollisionTerm,
-        box_distances,
-        env_boxes,
-        proxy_model,
-        separated_start,
-    )
-
-    robot = problem.robot
-    pm = proxy_model(robot)
-    boxes = env_boxes(problem)
-    # candidate self pairs: indices into pm.self_pairs (the user's exclusions removed)
-    cand_index, cand_self = _self_candidates(
-        pm, _excluded_pairs(problem) if opts.self_collision else None
-    )
-    allowed = np.zeros((len(pm.spheres), len(boxes)), dtype=bool)  # sphere may touch box
-    for k, box in enumerate(boxes):
-        allowed[:, k] = ~np.isin(pm.joint_ids, sorted(box.allowed_joints))
-    model, data = robot.model, scratch_data(robot.model)
-
-    def distances(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Candidate self and sphere-box distances at q; +inf where they cannot be below
-        margin + activation (the self pairs' broad phase) or the box may be touched."""
-        pin.forwardKinematics(model, data, q)
-        centers = pm.centers_world(model, data)
-        d_env = box_distances(pm, centers, boxes) if boxes else np.zeros((len(centers), 0))
-        d_self = np.zeros(0)
-        if len(cand_self):
-            d_self = pm.self_distances_within(centers, margin + opts.activation, cand_index)
-        return d_self, np.where(allowed, d_env, np.inf)
-
+    active = _active_set(problem)
     joints0 = None  # the first start: q_init with its pressed self pairs parted
-    if x0 is None and len(cand_self):
+    if x0 is None and len(active.links):
         joints0 = separated_start(
-            robot,
-            pm,
-            cand_index,
+            problem.robot,
+            active.pm,
+            active.links,
             opts.margin,
             problem.q_init,
             [c.patch.joint_id for c in problem.contacts],
         )
-    base_key = (problem.key(), len(boxes), opts.self_collision, opts.exclude)
+    base_key = (problem.key(), len(active.boxes), opts.self_collision, opts.exclude)
     learned_self, learned_env = _LEARNED.get(base_key, (frozenset(), frozenset()))
-    margin = opts.margin
-    x_warm = x0
-    active_self: set[tuple[int, int]] = set(learned_self)
-    active_env: set[tuple[int, int]] = set(learned_env)
-    q_check = problem.q_init
-    result: Result | None = None
+    active.self_pairs, active.env_pairs = set(learned_self), set(learned_env)
     cold = problem.solver_options
-    if cold.mu_init is None:
-        problem.solver_options = dataclasses.replace(cold, mu_init=COLLISION_MU_INIT)
-    if COLLISION_PERTURBATION is not None and cold.first_hessian_perturbation is None:
-        first, factor = COLLISION_PERTURBATION
-        problem.solver_options = dataclasses.replace(
-            problem.solver_options, first_hessian_perturbation=first, perturb_inc_fact_first=factor
-        )
-    cold_run = problem.solver_options
-    lam: dict[str, Any] | None = None
+    problem.solver_options = _collision_solver_options(cold)
+    loop = _Loop(problem, active, problem.solver_options, x0, joints0)
+    result: Result | None = None
     try:
         for _attempt in range(opts.tighten + 1):
-            for _round in range(opts.max_rounds):
-                d_self, d_env = distances(q_check)
-                close = margin + opts.activation
-                new_self = {tuple(map(int, cand_self[k])) for k in np.flatnonzero(d_self < close)}
-                near = d_env < margin + opts.environment_activation
-                new_env = {(int(i), int(k)) for i, k in zip(*np.nonzero(near), strict=True)}
-                if runs:
-                    bad_self = {
-                        tuple(map(int, cand_self[k]))
-                        for k in np.flatnonzero(d_self < margin - 1e-6)
-                    }
-                    bad_env = {
-                        (int(i), int(k))
-                        for i, k in zip(*np.nonzero(d_env < margin - 1e-6), strict=True)
-                    }
-                    if bad_self <= active_self and bad_env <= active_env:
-                        break  # no candidate outside the active set is violated
-                active_self |= new_self
-                active_env |= new_env
-                term = CollisionTerm(
-                    pm, tuple(sorted(active_self)), tuple(sorted(active_env)), boxes, margin
-                )
-                problem.collision_term = term
-                if lam is None:
-                    problem.solver_options = cold_run
-                    run = _run_ipopt(problem, x_warm, joints0=joints0)
-                else:
-                    problem.solver_options = dataclasses.replace(cold_run, warm_start=True)
-                    run = _run_ipopt(
-                        problem, x_warm, runs[-1].lam_x, _map_collision_multipliers(lam, term)
-                    )
-                runs.append(run)
-                if run.status not in _IPOPT_OK:
-                    break
-                x_warm = run.x
-                lam = _block_multipliers(run, term)
-                q_check = configuration_from_x(problem, run.compiled, run.x)
-            if len(active_self) + len(active_env) <= _LEARNED_MAX_PAIRS:
-                _LEARNED[base_key] = (frozenset(active_self), frozenset(active_env))
-            result = _result(problem, [*prior, *runs], margin)
-            if result.success or runs[-1].status not in _IPOPT_OK:
-                return result, [*prior, *runs]
+            loop.rounds(opts.max_rounds)
+            if len(active.self_pairs) + len(active.env_pairs) <= _LEARNED_MAX_PAIRS:
+                _LEARNED[base_key] = (frozenset(active.self_pairs), frozenset(active.env_pairs))
+            result = _result(problem, [*prior, *loop.runs], loop.margin)
+            if result.success or loop.runs[-1].status not in _IPOPT_OK:
+                return result, [*prior, *loop.runs]
             if not any(c.name.startswith("collision") for c in result.verification.failures):
-                return result, [*prior, *runs]
-            margin += 0.01  # the proxies passed but a mesh did not: tighten and retry
+                return result, [*prior, *loop.runs]
+            loop.margin += 0.01  # the proxies passed but a mesh did not: tighten and retry
     finally:
         problem.solver_options = cold
-    return result, [*prior, *runs]  # type: ignore[return-value]
+    return result, [*prior, *loop.runs]  # type: ignore[return-value]
 
 
-# candidate self pairs per proxy model and exclusions (the model is held: its id stays its own)
-_CANDIDATES: dict[
-    tuple[int, frozenset[tuple[int, int]] | None], tuple[Any, np.ndarray, np.ndarray]
-] = {}
+def _active_set(problem: Problem) -> ActiveSet:
+    """An empty active set for the problem: its candidate self pairs (those the pair rule
+    leaves checked, minus the user's exclusions; none without self-collision) and boxes."""
+    opts = problem.collision_options
+    robot = problem.robot
+    pm = proxy_model(robot)
+    links = np.zeros(0, dtype=int)
+    if opts.self_collision:
+        links = pm.links_of(frozenset(excluded_joint_ids(robot, opts)))
+    model = robot.model
+    return ActiveSet(pm, links, env_boxes(problem), opts, model, scratch_data(model))
 
 
-def _self_candidates(
-    pm: Any, excluded: set[tuple[int, int]] | None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Indices of pm.self_pairs whose joints are not an ``excluded`` pair (None: no self
-    pairs at all), and those pairs (k, 2), cached: masking Talos' 20,528 pairs took 0.3-0.5 ms
-    per solve."""
-    key = (id(pm), None if excluded is None else frozenset(excluded))
-    hit = _CANDIDATES.get(key)
-    if hit is not None and hit[0] is pm:
-        return hit[1], hit[2]
-    if excluded is None:
-        index = np.zeros(0, dtype=int)
-    elif not excluded:
-        index = np.arange(len(pm.self_pairs))
-    else:
-        jid = pm.joint_ids
-        a, b = jid[pm.self_pairs[:, 0]], jid[pm.self_pairs[:, 1]]
-        index = np.flatnonzero(
-            [(min(x, y), max(x, y)) not in excluded for x, y in zip(a, b, strict=True)]
+def _collision_solver_options(options: SolverOptions) -> SolverOptions:
+    """The options of the collision runs: COLLISION_MU_INIT and COLLISION_PERTURBATION
+    unless the problem sets its own."""
+    if options.mu_init is None:
+        options = dataclasses.replace(options, mu_init=COLLISION_MU_INIT)
+    if COLLISION_PERTURBATION is not None and options.first_hessian_perturbation is None:
+        first, factor = COLLISION_PERTURBATION
+        options = dataclasses.replace(
+            options, first_hessian_perturbation=first, perturb_inc_fact_first=factor
         )
-    if len(_CANDIDATES) > 64:
-        _CANDIDATES.clear()
-    _CANDIDATES[key] = (pm, index, pm.self_pairs[index])
-    return _CANDIDATES[key][1], _CANDIDATES[key][2]
+    return options
 
 
-def _excluded_pairs(problem: Problem) -> set[tuple[int, int]]:
-    from .collision import excluded_joint_ids
+@dataclass
+class _Loop:
+    """The state of the active-set loop: the runs so far, the warm start, the margin."""
 
-    return excluded_joint_ids(problem.robot, problem.collision_options)
+    problem: Problem
+    active: ActiveSet
+    cold_run: SolverOptions
+    x_warm: np.ndarray | None
+    joints0: np.ndarray | None
+    runs: list[_Run] = dataclasses.field(default_factory=list)
+    lam: dict[str, Any] | None = None
+    margin: float = 0.0
+
+    def __post_init__(self) -> None:
+        self.margin = self.problem.collision_options.margin
+        self.q_check = self.problem.q_init
+
+    def rounds(self, max_rounds: int) -> None:
+        """Up to ``max_rounds`` IPOPT runs, each after holding the pairs near (and violated
+        at) the last posture; ends when no candidate pair outside the held ones is violated
+        or a run fails."""
+        problem, active = self.problem, self.active
+        for _round in range(max_rounds):
+            scan = active.scan(self.q_check, self.margin)
+            if self.runs and not (scan.violated_self or scan.violated_env):
+                return  # no candidate outside the active set is violated
+            active.grow(scan)
+            term = CollisionTerm(
+                active.pm,
+                tuple(sorted(active.self_pairs)),
+                tuple(sorted(active.env_pairs)),
+                active.boxes,
+                self.margin,
+            )
+            problem.collision_term = term
+            if self.lam is None:
+                problem.solver_options = self.cold_run
+                run = _run_ipopt(problem, self.x_warm, joints0=self.joints0)
+            else:
+                problem.solver_options = dataclasses.replace(self.cold_run, warm_start=True)
+                lam = _map_collision_multipliers(self.lam, term)
+                run = _run_ipopt(problem, self.x_warm, self.runs[-1].lam_x, lam)
+            self.runs.append(run)
+            if run.status not in _IPOPT_OK:
+                return
+            self.x_warm = run.x
+            self.lam = _block_multipliers(run, term)
+            self.q_check = configuration_from_x(problem, run.compiled, run.x)
 
 
 def _result(problem: Problem, runs: list[_Run], margin: float | None = None) -> Result:
@@ -419,9 +388,10 @@ def _result(problem: Problem, runs: list[_Run], margin: float | None = None) -> 
             "ipopt_runs": len(runs),
             "max_violation": report.max_violation,
             "checks": {
-                c.name: {"value": c.value, "tolerance": c.tolerance, "ok": c.ok}
+                c.name: {"value": c.value, "tolerance": c.tolerance, "ok": c.ok, "detail": c.detail}
                 for c in report.checks
             },
+            "notes": list(report.notes),
         }
     )
     forces = {
@@ -495,18 +465,22 @@ def posture_dict(
 
 
 def _collision_dict(problem: Problem, margin: float | None) -> dict[str, Any] | None:
-    """What the mesh check must test: the boxes and the excluded joint pairs."""
+    """What the mesh check must test: the boxes, and the pairs it leaves unchecked with the
+    reason of each (posturegen.pairs; verify recomputes all but the user's)."""
     opts = problem.collision_options
     if opts is None:
         return None
-    from .collision import env_boxes, proxy_model
-
-    model = problem.robot.model
-    excluded = {tuple(sorted(p)) for p in proxy_model(problem.robot).excluded_joint_pairs}
-    excluded |= {tuple(sorted(p)) for p in opts.exclude}
+    robot = problem.robot
+    model = robot.model
+    unchecked: list[dict[str, Any]] = []
+    if opts.self_collision:
+        geometry = robot.collision_model()
+        rule = pair_rule(model, geometry, str(robot.srdf) if robot.srdf else None)
+        user = frozenset(excluded_joint_ids(robot, opts))
+        unchecked = unchecked_entries(model, geometry, rule, user)
     return {
         "margin": opts.margin if margin is None else margin,
         "self": opts.self_collision,
-        "exclude": sorted(list(p) for p in excluded),
+        "unchecked": unchecked,
         "boxes": [b.to_dict(model) for b in env_boxes(problem)],
     }
