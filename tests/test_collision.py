@@ -34,25 +34,28 @@ ROBOTS = {
 
 @pytest.mark.parametrize("name", sorted(ROBOTS))
 def test_proxies_contain_every_mesh_surface_and_stand_out_at_most_the_excess(name):
-    """Every triangle of every collision object (meshes and primitives, refined to 1.5 cm
-    edges) has its three corners in one sphere of its joint (a ball is convex: the triangle is
-    inside), and no sphere stands more than EXCESS outside (by construction; its record)."""
+    """Every point of every collision object's surface (meshes and primitives: the corners
+    and centroids of its triangles refined to 5 mm edges, and random points on them) lies in
+    a sphere of its joint, and no sphere stands more than EXCESS outside (its record)."""
     robot = load_robot(ROBOTS[name])
     pm = proxy_model(robot)
     by_joint: dict[int, list] = {}
     for s in pm.spheres:
         by_joint.setdefault(s.joint_id, []).append(s)
+    rng = np.random.default_rng(0)
     for obj in robot.collision_model().geometryObjects:
         surface = surface_of(obj)
-        V, F = refine(surface.vertices, surface.triangles, 0.015)
+        V, F = refine(surface.vertices, surface.triangles, 0.005)
+        w = rng.dirichlet(np.ones(3), len(F))
+        points = np.vstack([V, V[F].mean(axis=1), np.einsum("tk,tki->ti", w, V[F])])
         spheres = by_joint[int(obj.parentJoint)]
         c = np.array([s.center for s in spheres])
         r = np.array([s.radius for s in spheres])
-        inside = np.linalg.norm(V[:, None] - c[None], axis=2) <= r + 1e-9  # (n, S)
-        covered = inside[F[:, 0]] & inside[F[:, 1]] & inside[F[:, 2]]
-        assert covered.any(axis=1).all(), f"{name}: {obj.name} has triangles outside"
+        for k in range(0, len(points), 4096):
+            gap = np.linalg.norm(points[k : k + 4096, None] - c[None], axis=2) - r
+            assert gap.min(axis=1).max() <= surface.sagitta + 1e-9, f"{name}: {obj.name}"
     assert max(s.excess for s in pm.spheres) <= EXCESS + 1e-9
-    assert len(pm.self_pairs) > 0
+    assert len(pm.joint_pairs) > 0
 
 
 @given(
@@ -365,9 +368,9 @@ def test_the_reference_posture_passes_the_mesh_check_and_sets_the_clearances(nam
     data = robot.model.createData()
     pin.forwardKinematics(robot.model, data, q)
     centers = pm.centers_world(robot.model, data)
-    d = pm.distances(centers, np.arange(len(pm.self_pairs)))
+    i, j, link = _all_pairs(pm)
     closest = np.full(len(pm.joint_pairs), np.inf)
-    np.minimum.at(closest, pm.pair_link, d)
+    np.minimum.at(closest, link, pm.distances(centers, i, j))
     np.testing.assert_allclose(closest, pm.clearance, atol=1e-9)
 
 
@@ -484,22 +487,37 @@ def test_mesh_box_check_finds_what_a_brute_force_check_finds(talos):
     assert 0 < seen < 25  # boxes both touching and missing the robot were drawn
 
 
+def _all_pairs(pm):
+    """Every candidate sphere pair (i, j) and its joint pair index, listed (brute force)."""
+    i, j, link = [], [], []
+    for k, (a, b) in enumerate(pm.joint_pairs):
+        A, B = np.flatnonzero(pm.joint_ids == a), np.flatnonzero(pm.joint_ids == b)
+        i.append(np.repeat(A, len(B)))
+        j.append(np.tile(B, len(A)))
+        link.append(np.full(len(A) * len(B), k))
+    return np.concatenate(i), np.concatenate(j), np.concatenate(link)
+
+
 def test_broad_phase_of_the_self_pairs_keeps_every_close_pair(talos):
-    """close_pairs: exact distances, and exactly the candidate pairs closer than each joint
-    pair's slack (random postures, several slacks), against all pairs computed."""
+    """close_pairs: exact distances, and exactly the candidate pairs closer than their joint
+    pair's slack (random postures, several slacks), against every pair computed."""
     pm = proxy_model(talos)
-    every = np.arange(len(pm.self_pairs))
+    i, j, link = _all_pairs(pm)
+    rng = np.random.default_rng(1)
     for model, data in _random_postures(talos, 4, 3):
         centers = pm.centers_world(model, data)
-        exact = pm.distances(centers, every)
+        exact = pm.distances(centers, i, j)
         for within in (0.0, 0.06, 0.3):
-            slack = np.full(len(pm.joint_pairs), within)
-            idx, d = pm.close_pairs(centers, slack)
-            np.testing.assert_allclose(d, exact[idx], atol=1e-12)
-            np.testing.assert_array_equal(np.sort(idx), np.flatnonzero(exact < within))
+            slack = np.full(len(pm.joint_pairs), within) + rng.uniform(0, 0.02, len(pm.joint_pairs))
+            close = pm.close_pairs(centers, slack)
+            expected = np.flatnonzero(exact < slack[link])
+            assert len(close.d) == len(expected)
+            got = set(zip(close.i.tolist(), close.j.tolist(), strict=True))
+            assert got == set(zip(i[expected].tolist(), j[expected].tolist(), strict=True))
+            np.testing.assert_allclose(np.sort(close.d), np.sort(exact[expected]), atol=1e-12)
         links = np.arange(0, len(pm.joint_pairs), 3)
-        idx, _ = pm.close_pairs(centers, np.full(len(pm.joint_pairs), 0.3), links)
-        assert np.isin(pm.pair_link[idx], links).all()
+        close = pm.close_pairs(centers, np.full(len(pm.joint_pairs), 0.3), links)
+        assert np.isin(close.link, links).all()
 
 
 def test_the_separated_start_parts_pressed_pairs_and_keeps_the_supports(talos):
@@ -516,13 +534,15 @@ def test_the_separated_start_parts_pressed_pairs_and_keeps_the_supports(talos):
     qj = separated_start(talos, pm, links, margin, talos.q_init, feet)
     target = pm.pair_clearance(margin) + SEPARATION
 
+    i, j, link = _all_pairs(pm)
+
     def shortfall(q):
         """(P,) how far each joint pair's closest proxies are below its target [m]."""
         data = model.createData()
         pin.forwardKinematics(model, data, q)
-        d = pm.distances(pm.centers_world(model, data), np.arange(len(pm.self_pairs)))
+        d = pm.distances(pm.centers_world(model, data), i, j)
         closest = np.full(len(pm.joint_pairs), np.inf)
-        np.minimum.at(closest, pm.pair_link, d)
+        np.minimum.at(closest, link, d)
         return target - closest
 
     q = talos.q_init.copy()

@@ -16,7 +16,7 @@ import numpy as np
 import pinocchio as pin
 
 from .collision import ACTIVE_PER_LINK, CollisionOptions, EnvBox, box_distances
-from .proxies import ProxyModel
+from .proxies import ProxyModel, closest
 
 TOL_VIOLATION = 1e-6  # [m] a sphere-box pair this far below the margin is violated
 # [m] a self pair is violated this far below its clearance, when its proxies stay apart: the
@@ -68,12 +68,17 @@ class ActiveSet:
         out = Scan()
         if len(self.links):
             clearance = self.pm.pair_clearance(margin)
-            idx, d = self.pm.close_pairs(centers, clearance + self.options.activation, self.links)
-            out.near_self = self._tuples(self.pm.closest(idx, d, ACTIVE_PER_LINK))
-            bad = d < violation_threshold(clearance[self.pm.pair_link[idx]])
-            held = np.array([tuple(p) in self.self_pairs for p in self.pm.self_pairs[idx[bad]]])
-            fresh = np.flatnonzero(bad)[~held] if len(held) else np.zeros(0, dtype=int)
-            out.violated_self = self._tuples(self.pm.closest(idx[fresh], d[fresh], ACTIVE_PER_LINK))
+            close = self.pm.close_pairs(centers, clearance + self.options.activation, self.links)
+            out.near_self = closest(close, ACTIVE_PER_LINK).tuples()
+            bad = close.take(close.d < violation_threshold(clearance[close.link]))
+            held = np.array(
+                [
+                    (min(a, b), max(a, b)) in self.self_pairs
+                    for a, b in zip(bad.i, bad.j, strict=True)
+                ],
+                dtype=bool,
+            )
+            out.violated_self = closest(bad.take(~held), ACTIVE_PER_LINK).tuples()
         if self.boxes:
             d_env = np.where(self.allowed, box_distances(self.pm, centers, self.boxes), np.inf)
             out.near_env = self._env(d_env, margin + self.options.environment_activation)
@@ -85,9 +90,6 @@ class ActiveSet:
         """Hold the scan's near and violated pairs too."""
         self.self_pairs |= scan.near_self | scan.violated_self
         self.env_pairs |= scan.near_env | scan.violated_env
-
-    def _tuples(self, pairs: np.ndarray) -> set[tuple[int, int]]:
-        return {(int(i), int(j)) for i, j in self.pm.self_pairs[pairs]}
 
     def _held_env(self) -> np.ndarray:
         """(S, B) mask of the sphere-box pairs held."""

@@ -46,7 +46,7 @@ import pinocchio as pin
 from .errors import InputError
 from .kinematics import skew
 from .problem import BlockDerivatives, BuildContext, Problem, Term
-from .proxies import ProxyModel, joint_pair_index, proxy_model
+from .proxies import ProxyModel, closest, proxy_model
 from .proxy_fit import Sphere
 from .robot import Robot
 
@@ -203,17 +203,16 @@ def separated_start(
     for _ in range(3):
         pin.forwardKinematics(model, data, q)
         centers = pm.centers_world(model, data)
-        near, d = pm.close_pairs(centers, target, links)
-        near = pm.closest(near, d, SEPARATED_PER_LINK)
-        if near.size == 0:
+        near = closest(pm.close_pairs(centers, target, links), SEPARATED_PER_LINK)
+        if len(near.d) == 0:
             break
         pin.computeJointJacobians(model, data, q)
         rows, short = [], []
-        for k, dk in zip(near, pm.distances(centers, near), strict=True):
-            grad = _pair_gradient(model, data, pm, centers, pm.self_pairs[k])
+        for i, j, link, dk in zip(near.i, near.j, near.link, near.d, strict=True):
+            grad = _pair_gradient(model, data, pm, centers, (int(i), int(j)))
             if np.linalg.norm(grad[movable]) > 1e-6:  # pairs the free joints can part
                 rows.append(grad[movable])
-                short.append(target[pm.pair_link[k]] - dk)
+                short.append(target[link] - dk)
         if not rows:
             break
         A, b = np.array(rows), np.array(short)
@@ -227,11 +226,15 @@ def separated_start(
 
 
 def _pair_gradient(
-    model: pin.Model, data: pin.Data, pm: ProxyModel, centers: np.ndarray, pair: np.ndarray
+    model: pin.Model,
+    data: pin.Data,
+    pm: ProxyModel,
+    centers: np.ndarray,
+    pair: tuple[int, int],
 ) -> np.ndarray:
     """(nv,) the gradient of |c_i - c_j| - r_i - r_j: n·(J_i - J_j), n the unit vector from
     c_j to c_i, J the sphere centres' Jacobians (joint Jacobians already in ``data``)."""
-    i, j = (int(v) for v in pair)
+    i, j = pair
     n = centers[i] - centers[j]
     n /= max(float(np.linalg.norm(n)), 1e-12)
     grad = np.zeros(model.nv)
@@ -265,11 +268,6 @@ ENV_SATURATION = 0.05
 # enter the program in one active-set round: proxies fitted to 1 cm put thousands of sphere
 # pairs within reach of each other (Talos' legs at half-sitting: 4,000 within 6 cm)
 ACTIVE_PER_LINK = 4
-
-
-def _joints(a: Sphere, b: Sphere) -> tuple[int, int]:
-    """The sorted joint ids of two spheres."""
-    return (a.joint_id, b.joint_id) if a.joint_id <= b.joint_id else (b.joint_id, a.joint_id)
 
 
 def _center(state: Any, sphere: Sphere) -> Any:
@@ -471,8 +469,7 @@ class CollisionTerm(Term):
             local = ctx.kin.forward(ca.SX.zeros(3), ca.SX.eye(3), ctx.joints)
             used = sorted({i for p in self.self_pairs for i in p})
             c = {i: _center(local, spheres[i]) for i in used}
-            index = joint_pair_index(self.pm)
-            clearance = self.pm.clearance
+            pm, clearance = self.pm, self.pm.clearance
             rows = [
                 [
                     _pair_element(
@@ -480,7 +477,10 @@ class CollisionTerm(Term):
                         r,
                         i,
                         j,
-                        ca.fmin(margin, clearance[index[_joints(spheres[i], spheres[j])]]),
+                        ca.fmin(
+                            margin,
+                            clearance[pm.link_index(spheres[i].joint_id, spheres[j].joint_id)],
+                        ),
                     )
                     for i, j in members
                 ]

@@ -33,10 +33,34 @@ def cache_dir() -> Path:
     return Path(root) / "proxies"
 
 
+GROUP = 16  # spheres per group of the broad phase (a joint's spheres split by their extent)
+
+
+@dataclass(frozen=True)
+class Close:
+    """Candidate sphere pairs found close: sphere indices i (of the joint pair's first joint)
+    and j, their joint pair (index into ProxyModel.joint_pairs) and distance [m], each (k,)."""
+
+    i: np.ndarray
+    j: np.ndarray
+    link: np.ndarray
+    d: np.ndarray
+
+    def take(self, index: np.ndarray) -> Close:
+        """The pairs at ``index`` (a mask or indices)."""
+        return Close(self.i[index], self.j[index], self.link[index], self.d[index])
+
+    def tuples(self) -> set[tuple[int, int]]:
+        """{(min(i, j), max(i, j))}: the pairs as the program holds them."""
+        lo, hi = np.minimum(self.i, self.j), np.maximum(self.i, self.j)
+        return {(int(a), int(b)) for a, b in zip(lo, hi, strict=True)}
+
+
 @dataclass
 class ProxyModel:
-    """Sphere proxies of a robot and its candidate self-collision pairs, sorted by pair of
-    joints (the sphere pairs of each pair of joints are contiguous)."""
+    """Sphere proxies of a robot (sorted by joint, then by group of the broad phase) and its
+    candidate self-collision pairs: every pair of spheres of the candidate joint pairs, never
+    listed (Talos: 3 million), found by a broad phase on joints, then groups of GROUP spheres."""
 
     spheres: list[Sphere]
     joint_pairs: np.ndarray  # (P, 2) candidate joint pairs (sorted ids)
@@ -47,43 +71,40 @@ class ProxyModel:
     report: dict[str, Any] = field(default_factory=dict)  # the fit's refinement report
 
     def __post_init__(self) -> None:
+        groups = _grouped(self.spheres)  # spheres reordered: joints and groups contiguous
+        self.spheres = [self.spheres[k] for g in groups for k in g]
         self._joint = np.array([s.joint_id for s in self.spheres], dtype=int)  # (S,)
         self._local = np.array([s.center for s in self.spheres]).reshape(-1, 3)  # (S, 3)
         self._radii = np.array([s.radius for s in self.spheres])  # (S,)
         self._joints = np.unique(self._joint)  # the joints that carry spheres
         self._joint_list = [int(j) for j in self._joints]
-        n = int(self._joint.max(initial=0)) + 1
-        count = np.maximum(np.bincount(self._joint, minlength=n), 1)  # (n,)
-        # broad phase: per joint, a sphere around its proxies, centred on the mean of their
-        # centres (its world centre is the mean of theirs: a matrix product)
-        self._mean = np.zeros((n, len(self.spheres)))
-        self._mean[self._joint, np.arange(len(self.spheres))] = 1.0 / count[self._joint]
-        mean = self._mean @ self._local
-        self._bound_radius = np.zeros(n)
-        np.maximum.at(
-            self._bound_radius,
-            self._joint,
-            np.linalg.norm(self._local - mean[self._joint], axis=1) + self._radii,
-        )
-        self._link_a, self._link_b = self.joint_pairs[:, 0], self.joint_pairs[:, 1]
-        self._pairs, self._pair_link, self._link_start = _sphere_pairs(
-            self._joint, self.joint_pairs
-        )
-        self._pair_r = self._radii[self._pairs[:, 0]] + self._radii[self._pairs[:, 1]]
-
-    @property
-    def self_pairs(self) -> np.ndarray:
-        """(n, 2) candidate sphere pairs (i, j), sorted by pair of joints."""
-        return self._pairs
-
-    @property
-    def pair_link(self) -> np.ndarray:
-        """(n,) index into ``joint_pairs`` of each candidate sphere pair."""
-        return self._pair_link
+        self._joint_start = np.searchsorted(self._joint, np.arange(self._joint.max(initial=0) + 2))
+        sizes = np.array([len(g) for g in groups], dtype=int)
+        self._group_start = np.concatenate([[0], np.cumsum(sizes)])  # (G + 1,)
+        self._group_joint = self._joint[self._group_start[:-1]]  # (G,)
+        self._members = np.full((len(groups), GROUP), -1, dtype=int)  # (G, GROUP)
+        for g, (start, size) in enumerate(zip(self._group_start[:-1], sizes, strict=True)):
+            self._members[g, :size] = np.arange(start, start + size)
+        # each joint pair's group pairs, contiguous: (ga, gb) for ga of a, gb of b
+        ga, gb, link = [], [], []
+        for k, (a, b) in enumerate(self.joint_pairs):
+            A, B = np.flatnonzero(self._group_joint == a), np.flatnonzero(self._group_joint == b)
+            ga.append(np.repeat(A, len(B)))
+            gb.append(np.tile(B, len(A)))
+            link.append(np.full(len(A) * len(B), k))
+        self._ga = np.concatenate(ga) if ga else np.zeros(0, dtype=int)
+        self._gb = np.concatenate(gb) if gb else np.zeros(0, dtype=int)
+        self._gp_link = np.concatenate(link) if link else np.zeros(0, dtype=int)
+        self._gp_start = np.searchsorted(self._gp_link, np.arange(len(self.joint_pairs) + 1))
+        self._index = {(int(a), int(b)): k for k, (a, b) in enumerate(self.joint_pairs)}
 
     def pair_clearance(self, margin: float) -> np.ndarray:
         """(P,) [m] how far apart each candidate joint pair is held: min(margin, clearance)."""
         return np.minimum(margin, self.clearance)
+
+    def link_index(self, a: int, b: int) -> int:
+        """The index of joint pair (a, b) (either order) in ``joint_pairs``."""
+        return self._index[joint_pair(a, b)]
 
     def centers_world(self, model: pin.Model, data: pin.Data) -> np.ndarray:
         """(S, 3) sphere centres in world for the placements already in ``data.oMi``:
@@ -96,40 +117,36 @@ class ProxyModel:
 
     def close_pairs(
         self, centers: np.ndarray, slack: np.ndarray, links: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """The candidate sphere pairs closer than ``slack`` (P,) [m] beyond their joint
-        pair's own (``slack[l]``, per joint pair), among the joint pairs ``links`` (indices,
-        default all), for sphere centres (S, 3) in world: (k,) their indices into
-        ``self_pairs`` and (k,) their distances |c_i - c_j| - r_i - r_j [m]. Joint pairs whose
-        bounding spheres are farther apart than their slack (a lower bound of every distance
-        between their proxies) are not looked at."""
-        b = self._mean @ centers  # the bounding spheres' world centres
-        k = np.arange(len(self.joint_pairs)) if links is None else np.asarray(links)
-        gap = np.linalg.norm(b[self._link_a[k]] - b[self._link_b[k]], axis=1)
-        gap -= self._bound_radius[self._link_a[k]] + self._bound_radius[self._link_b[k]]
+    ) -> Close:
+        """The candidate sphere pairs closer than their joint pair's ``slack`` (P,) [m],
+        among the joint pairs ``links`` (indices, default all), for sphere centres (S, 3) in
+        world. Joint pairs, then pairs of groups, whose bounding spheres are farther apart
+        than the slack (a lower bound of every distance between their spheres) are skipped."""
+        k = np.arange(len(self.joint_pairs)) if links is None else np.asarray(links, dtype=int)
+        jc, jr = _bounds(centers, self._radii, self._joint_start, self._joints)
+        a, b = self.joint_pairs[k, 0], self.joint_pairs[k, 1]
+        gap = np.linalg.norm(jc[a] - jc[b], axis=1) - jr[a] - jr[b]
         k = k[gap < slack[k]]  # the joint pairs that pass
-        first, count = self._link_start[k], self._link_start[k + 1] - self._link_start[k]
-        # their sphere pairs: the runs first:first + count, gathered at once
-        run_start = np.cumsum(count) - count
-        pairs = np.arange(count.sum()) + np.repeat(first - run_start, count)
-        u = centers[self._pairs[pairs, 0]] - centers[self._pairs[pairs, 1]]
-        d = np.sqrt(np.einsum("ij,ij->i", u, u)) - self._pair_r[pairs]
-        keep = d < slack[self._pair_link[pairs]]
-        return pairs[keep], d[keep]
+        first, count = self._gp_start[k], self._gp_start[k + 1] - self._gp_start[k]
+        gp = np.arange(count.sum()) + np.repeat(first - (np.cumsum(count) - count), count)
+        gc, gr = _bounds(centers, self._radii, self._group_start, np.arange(len(self._members)))
+        ga, gb, link = self._ga[gp], self._gb[gp], self._gp_link[gp]
+        gap = np.linalg.norm(gc[ga] - gc[gb], axis=1) - gr[ga] - gr[gb]
+        ok = gap < slack[link]  # the group pairs that pass
+        ga, gb, link = ga[ok], gb[ok], link[ok]
+        i = np.repeat(self._members[ga], GROUP, axis=1).ravel()  # (n·GROUP²,)
+        j = np.tile(self._members[gb], GROUP).ravel()
+        link = np.repeat(link, GROUP * GROUP)
+        valid = (i >= 0) & (j >= 0)
+        i, j, link = i[valid], j[valid], link[valid]
+        d = self.distances(centers, i, j)
+        keep = d < slack[link]
+        return Close(i[keep], j[keep], link[keep], d[keep])
 
-    def closest(self, pairs: np.ndarray, d: np.ndarray, per_link: int) -> np.ndarray:
-        """The ``per_link`` closest of the sphere pairs ``pairs`` (indices, distances ``d``)
-        of each joint pair: a subset of ``pairs``."""
-        link = self._pair_link[pairs]
-        order = np.lexsort((d, link))
-        link = link[order]
-        first = np.searchsorted(link, link)  # where each one's joint pair starts
-        return pairs[order[np.arange(len(link)) - first < per_link]]
-
-    def distances(self, centers: np.ndarray, pairs: np.ndarray) -> np.ndarray:
-        """Distances |c_i - c_j| - r_i - r_j [m] of candidate sphere pairs (indices)."""
-        u = centers[self._pairs[pairs, 0]] - centers[self._pairs[pairs, 1]]
-        return np.sqrt(np.einsum("ij,ij->i", u, u)) - self._pair_r[pairs]
+    def distances(self, centers: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        """Distances |c_i - c_j| - r_i - r_j [m] of sphere pairs (indices i, j)."""
+        u = centers[i] - centers[j]
+        return np.sqrt(np.einsum("ij,ij->i", u, u)) - self._radii[i] - self._radii[j]
 
     def links_of(self, excluded: set[tuple[int, int]] | frozenset[tuple[int, int]]) -> np.ndarray:
         """Indices of the candidate joint pairs that are not ``excluded`` (sorted ids)."""
@@ -149,22 +166,52 @@ class ProxyModel:
         return self._joint
 
 
-def _sphere_pairs(
-    joint: np.ndarray, joint_pairs: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Every pair of spheres (i, j) of each joint pair (a, b), i of a and j of b: (n, 2),
-    the index of each one's joint pair (n,), and (P + 1,) where each joint pair's run
-    starts."""
-    of = {int(j): np.flatnonzero(joint == j) for j in np.unique(joint)}
-    blocks, links = [], []
-    for k, (a, b) in enumerate(joint_pairs):
-        ia, ib = of[int(a)], of[int(b)]
-        blocks.append(np.c_[np.repeat(ia, len(ib)), np.tile(ib, len(ia))])
-        links.append(np.full(len(ia) * len(ib), k))
-    pairs = np.vstack(blocks).astype(np.int32) if blocks else np.zeros((0, 2), dtype=np.int32)
-    link = np.concatenate(links) if links else np.zeros(0, dtype=int)
-    start = np.searchsorted(link, np.arange(len(joint_pairs) + 1))
-    return pairs, link, start
+def closest(close: Close, per_link: int) -> Close:
+    """The ``per_link`` closest pairs of each joint pair among ``close``."""
+    order = np.lexsort((close.d, close.link))
+    link = close.link[order]
+    first = np.searchsorted(link, link)  # where each one's joint pair starts
+    return close.take(order[np.arange(len(link)) - first < per_link])
+
+
+def _bounds(
+    centers: np.ndarray, radii: np.ndarray, start: np.ndarray, which: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """World centres and radii of spheres bounding the runs start[w]:start[w + 1] of the
+    spheres, for w in ``which`` (indexed by w; other rows unused): the mean of their centres
+    and the farthest sphere from it."""
+    n = len(start) - 1
+    mean = np.zeros((n, 3))
+    radius = np.zeros(n)
+    which = np.asarray(which, dtype=int)
+    which = which[start[which + 1] > start[which]]
+    sums = np.add.reduceat(centers, start[which], axis=0)
+    mean[which] = sums / (start[which + 1] - start[which])[:, None]
+    owner = np.repeat(which, start[which + 1] - start[which])
+    rows = np.concatenate([np.arange(start[w], start[w + 1]) for w in which])
+    np.maximum.at(radius, owner, np.linalg.norm(centers[rows] - mean[owner], axis=1) + radii[rows])
+    return mean, radius
+
+
+def _grouped(spheres: list[Sphere]) -> list[list[int]]:
+    """Groups of at most GROUP sphere indices, each of one joint, by joint: a joint's
+    spheres split at the median of their centres along their widest extent until small."""
+    out: list[list[int]] = []
+    by_joint: dict[int, list[int]] = {}
+    for k, s in enumerate(spheres):
+        by_joint.setdefault(s.joint_id, []).append(k)
+    for j in sorted(by_joint):
+        todo = [np.array(by_joint[j])]
+        while todo:
+            idx = todo.pop()
+            if len(idx) <= GROUP:
+                out.append([int(k) for k in idx])
+                continue
+            c = np.array([spheres[k].center for k in idx])
+            axis = int(np.argmax(np.ptp(c, axis=0)))
+            order = idx[np.argsort(c[:, axis], kind="stable")]
+            todo += [order[len(order) // 2 :], order[: len(order) // 2]]
+    return out
 
 
 def _cache_key(robot: Robot) -> str:
@@ -268,8 +315,3 @@ def limbs(model: pin.Model) -> np.ndarray:
         parent = int(model.parents[j])
         out[j] = out[parent] if children[parent] < 2 and parent > 0 else j
     return out
-
-
-def joint_pair_index(pm: ProxyModel) -> dict[tuple[int, int], int]:
-    """{(a, b): index into pm.joint_pairs}."""
-    return {joint_pair(int(a), int(b)): k for k, (a, b) in enumerate(pm.joint_pairs)}

@@ -311,7 +311,6 @@ def _near_radius(cand: _Candidates, near: np.ndarray, eps: float) -> np.ndarray:
 # --------------------------------------------------------------------------- a robot's proxies
 PROXY_VERSION = 6
 REFERENCE_MARGIN = 0.01  # [m] the clearance the proxies of a pair aim for at the reference
-REFINE_ROUNDS = 2  # rounds of refinement of the pairs whose proxies lose it
 MIN_REFINE_GAP = 0.004  # [m] pairs whose meshes are closer at the reference are not refined
 MIN_NEAR_EXCESS = 0.002  # [m] the smallest excess of a refined region
 
@@ -322,11 +321,11 @@ def fit_robot(
     """The proxies of every joint that carries geometry (:func:`fit_joint`), refined where
     two links' proxies are closer at the reference posture than min(REFERENCE_MARGIN, half
     their meshes' distance) and the meshes at least MIN_REFINE_GAP apart: each of the two
-    joints is fitted again with the excess of its surface that faces the other (within that
-    distance plus 2ε of it) at a quarter of the meshes' distance (at least MIN_NEAR_EXCESS),
-    halved in a second round if still short. Returns the spheres and a report: every checked
-    pair whose proxies are closer than REFERENCE_MARGIN at the reference, with its mesh and
-    proxy distances, and the refined joints' near excess."""
+    joints is fitted again with the excess of its surface that faces the other (within half
+    that distance + ε + ε_near of it: where an unrefined sphere could reach) at ε_near, a
+    quarter of the meshes' distance (at least MIN_NEAR_EXCESS). Returns the spheres and a
+    report: every checked pair whose proxies are closer than REFERENCE_MARGIN at the
+    reference, with its mesh and proxy distances, and the refined joints' near excess."""
     surfaces: dict[int, list[Surface]] = {}
     for obj in geometry.geometryObjects:
         surfaces.setdefault(int(obj.parentJoint), []).append(surface_of(obj))
@@ -336,29 +335,19 @@ def fit_robot(
     gdata = geometry.createData()
     pin.updateGeometryPlacements(model, data, geometry, gdata)
     near_excess: dict[int, float] = {}
-    near: dict[tuple[int, int], np.ndarray] = {}  # (joint, other): its points facing other
-    for _ in range(REFINE_ROUNDS):
-        tight = _tight_pairs(model, data, geometry, gdata, rule, fitted)
-        todo: dict[int, float] = {}
-        for (a, b), (mesh_gap, _) in tight.items():
-            if mesh_gap < MIN_REFINE_GAP:
-                continue  # closer than spheres can follow: held at its reference clearance
-            for j, other in ((a, b), (b, a)):
-                was = near_excess.get(j, 2 * mesh_gap / 4)
-                if was <= MIN_NEAR_EXCESS:
-                    continue  # as fine as it gets
-                todo[j] = min(todo.get(j, EXCESS), max(was / 2, MIN_NEAR_EXCESS))
-                if (j, other) not in near:
-                    within = mesh_gap + 2 * EXCESS
-                    near[(j, other)] = _facing(
-                        surfaces[j], data.oMi[j], geometry, gdata, other, within
-                    )
-        for j, eps in todo.items():
-            near_excess[j] = eps
-            points = np.vstack([v for (k, _), v in near.items() if k == j])
-            fitted[j] = fit_joint(j, surfaces[j], EXCESS, points, eps)
-        if not todo:
-            break
+    near: dict[int, list[np.ndarray]] = {}  # per joint: its points that face a close link
+    for (a, b), (mesh_gap, _) in _tight_pairs(model, data, geometry, gdata, rule, fitted).items():
+        if mesh_gap < MIN_REFINE_GAP:
+            continue  # closer than spheres can follow: held at its reference clearance
+        eps = float(np.clip(mesh_gap / 4, MIN_NEAR_EXCESS, EXCESS))
+        within = mesh_gap / 2 + EXCESS + eps  # where an unrefined sphere could reach it
+        for j, other in ((a, b), (b, a)):
+            near_excess[j] = min(near_excess.get(j, EXCESS), eps)
+            near.setdefault(j, []).append(
+                _facing(surfaces[j], data.oMi[j], geometry, gdata, other, within)
+            )
+    for j, eps in near_excess.items():
+        fitted[j] = fit_joint(j, surfaces[j], EXCESS, np.vstack(near[j]), eps)
     final = _tight_pairs(model, data, geometry, gdata, rule, fitted, everything=True)
     report = {
         "close": [
