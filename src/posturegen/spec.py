@@ -13,7 +13,7 @@ import pinocchio as pin
 import yaml
 
 from . import _fields as F
-from .collision import CollisionOptions, excluded_joint_ids
+from .collision import MARGIN, CollisionOptions, excluded_joint_ids
 from .constraints import PositionTask
 from .contacts import (
     Contact,
@@ -310,7 +310,7 @@ def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
         env = _flag(env, "options.environment_collision")
     avoid_env = bool(scene.obstacles) if env == "auto" else env
     margin = F.number(
-        options.get("collision_margin", 0.01), "options.collision_margin", minimum=0.0
+        options.get("collision_margin", MARGIN), "options.collision_margin", minimum=0.0
     )
     exclude = options.get("collision_exclude", []) or []
     if not isinstance(exclude, list) or not all(
