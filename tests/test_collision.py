@@ -21,7 +21,7 @@ from posturegen.proxies import proxy_model
 from posturegen.proxy_fit import EXCESS
 from posturegen.robot import load_robot
 from posturegen.surface import refine, surface_of
-from posturegen.verify import mesh_collision_checks
+from posturegen.mesh_check import mesh_collision_checks
 from tests.conftest import first_run_stops_early
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
@@ -451,7 +451,7 @@ def test_mesh_box_check_finds_what_a_brute_force_check_finds(talos):
     finds one more than TOL_PENETRATION inside."""
     import coal
 
-    from posturegen.verify import TOL_PENETRATION
+    from posturegen.mesh_check import TOL_PENETRATION
 
     model, geometry, q = talos.model, talos.collision_model(), talos.q_init
     data = model.createData()
