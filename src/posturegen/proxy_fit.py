@@ -7,9 +7,11 @@ object: it stands at most ε = EXCESS outside (its *excess*). The joint's surfac
 into triangles of edges <= EDGE; candidate centres are the centres of the largest empty
 balls tangent to the surface at seed points (one per SEED_SPACING cell, along the
 triangle's inward normal: for a surface that is not closed and consistently oriented, the
-side where the generalized winding number is larger), and the points halfway to them;
-inside means a winding number above INSIDE (robust to the holes of the open meshes of
-HRP-2 and Romeo: a point in a half-closed cavity is not inside). A candidate covers a
+side where the generalized winding number is larger), and the points halfway to them.
+Inside means a winding number above INSIDE once the mesh's holes are capped (robust to the
+open meshes of HRP-2 and Romeo: a point in a half-closed cavity is not inside), and for a
+mesh still open or inconsistently oriented once capped (25 of HRP-2's 31), also inside its
+convex hull and no deeper than below it. A candidate covers a
 triangle when its sphere contains the triangle's three corners (a ball is convex; a
 tessellated primitive's sagitta added). A greedy set cover picks candidates, the one that
 covers most uncovered triangles first; the triangles left seed candidates at half the
@@ -146,9 +148,9 @@ def _candidates(surfaces: list[Surface], el: _Elements, seeds: np.ndarray) -> _C
         c = np.vstack([p + (f * t)[:, None] * n for f in FRACTIONS])
         c = c[np.tile(t, len(FRACTIONS)) * np.repeat(FRACTIONS, len(t)) > 1e-4]
         d = depth(s, c)
-        if s.mesh and s.closed:  # inside: the winding number of the capped mesh
+        if s.mesh:  # inside: the winding number of the capped mesh
             d = np.where(np.abs(winding_number(c, s.solid_corners)) > INSIDE, d, 0.0)
-        elif s.mesh:  # inside the convex hull, and no deeper than below its surface
+        if s.mesh and not s.closed:  # and inside the convex hull, no deeper than below it
             d = np.minimum(d, -point_distances(s.hull, pin.SE3.Identity(), c, signed=True))
         good = d > 1e-4
         centres.append(c[good])

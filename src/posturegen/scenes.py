@@ -417,7 +417,10 @@ RUNG_SPACING = 0.25  # [m]
 RUNG_THICKNESS = 0.025  # [m]
 LADDER_STANDOFF = 0.25  # [m] from the toes at the start to the rungs' centre line
 HAND_MU = 1.0  # a hand closed around a rung holds better than a sole on a plank
-STILE_CLEARANCE = 0.1  # [m] from the shoulders to the stiles
+# [m] from the shoulders to the stiles. 10 cm while the proxies stood up to 10 cm out; with
+# every pair avoided on proxies within 1 cm of HRP-2's meshes, its wrists met the stiles at
+# 10 and 15 cm ('left hand on rung 5' infeasible), not at 20 cm
+STILE_CLEARANCE = 0.2
 # On a vertical ladder the body hangs behind the rungs (its knees cannot pass them): the hands
 # pull it towards the ladder and the rung under the foot holds it back, both by friction along
 # x. The default 4-face pyramid has its faces normal to x and y, so it grants only μ/√2 along x
@@ -427,8 +430,10 @@ LADDER_FRICTION: dict[str, Any] = {"model": "pyramid", "faces": 8}
 RUNG_FOOT_Y = 0.0  # [m] the first foot's target on rung 1, right of the middle
 # [m] the target of every later foot, this far left (left foot) or right (right foot) of the
 # middle. Unguided, HRP-2's left foot landed 20 cm left of the middle on rung 2, and its climb
-# (steps=1) failed at "left hand on rung 8" (its body's proxies against the ladder)
-CLIMB_FOOT_Y = 0.05
+# (steps=1) failed at "left hand on rung 8" (its body's proxies against the ladder). With every
+# pair avoided (issue 14) its climb (steps=2) failed at 'right foot on rung 3' with 5 cm (the
+# shin against rungs 4 and 5, the chest held off the body), passed with 8 cm
+CLIMB_FOOT_Y = 0.08
 
 
 def _foot_on_rung(patch: str, k: int, geometric: bool, sole_width: float) -> dict[str, Any]:
