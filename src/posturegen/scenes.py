@@ -222,8 +222,9 @@ def _steps_geometry(
 
 # [rad] each foot's yaw on a step, either way from straight up the stairs: free, the maximized
 # ellipse turns the foot across the short step (ATLAS: -1.28 rad on step 1, and its climb
-# failed at step 4)
-STAIR_FOOT_YAW = 0.35
+# failed at step 4). 0.35 until every pair was avoided (issue 14): Talos' thigh then met its
+# pelvis putting its right foot on step 3 (IPOPT infeasible at 0.35 and 0.5, verified at 0.6)
+STAIR_FOOT_YAW = 0.6
 
 
 def stairs(robot: str, steps: int = 2) -> dict[str, Any]:
@@ -281,7 +282,9 @@ def stairs(robot: str, steps: int = 2) -> dict[str, Any]:
 # ladders: the first foot towards the middle of step or rung 1, and on the inclined ladder the
 # lifted left foot towards step 2.
 FOOTHOLD_WEIGHT = 1.0
-LIFT_WEIGHT = 0.3
+# 0.3 until every pair was avoided (issue 14): Talos' lifted left foot then stopped under step
+# 2 (IPOPT did not converge at 0.3 and 0.6); at 1.0 both Talos and HRP-2 are verified
+LIFT_WEIGHT = 1.0
 STEP_FOOT_Y = 0.05  # [m] the first foot's target on step 1, right of the middle
 # the lifted foot's target: level with step 2, its toes this far behind step 3's front edge
 # (measured: 2 to 6 cm solve on HRP-2 and Talos, 0 not on Talos; with the target 5 cm higher,
