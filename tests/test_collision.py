@@ -172,7 +172,7 @@ def test_distance_gradients_match_finite_differences():
     """The rows as the solver sees them: sphere-sphere and sphere-box distances of q."""
     data = copy.deepcopy(STAND)
     data["options"]["self_collision"] = True
-    data["obstacles"] = [{"name": "box", "box": [0.3, 0.3, 0.3], "position": [0.5, 0.15, 0.9]}]
+    data["obstacles"] = [{"name": "box", "box": [0.3, 0.3, 0.3], "position": [0.45, -0.12, 0.9]}]
     problem = problem_from_dict(data)
     result = solve(problem)  # sets the active collision rows
     compiled = problem.compile()
@@ -200,7 +200,7 @@ def test_hand_built_derivatives_match_casadi_and_finite_differences():
     against central differences, at seeded random x and multipliers."""
     data = copy.deepcopy(STAND)
     data["options"]["self_collision"] = True
-    data["obstacles"] = [{"name": "box", "box": [0.3, 0.3, 0.3], "position": [0.5, 0.15, 0.9]}]
+    data["obstacles"] = [{"name": "box", "box": [0.3, 0.3, 0.3], "position": [0.45, -0.12, 0.9]}]
     problem = problem_from_dict(data)
     solve(problem)  # sets the active collision rows
     from posturegen import problem as problem_module

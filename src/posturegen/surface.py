@@ -294,10 +294,53 @@ def primitive_depth(g: coal.ShapeBase, p: np.ndarray) -> np.ndarray:
     raise ModelError(f"no depth for a {type(g).__name__}")
 
 
+WINDING_CELL = 0.02  # [m] clusters of triangles seen as dipoles from afar (winding_number)
+WINDING_EXACT = 2000  # up to this many triangles, every one is summed exactly
+
+
 def winding_number(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
     """(k,) generalized winding numbers of points (k, 3) w.r.t. triangles (m, 3, 3): the
     sum of their signed solid angles / 4π (Van Oosterom-Strackee): ±1 inside a closed
-    surface, 0 outside, in between near the holes of an open one."""
+    surface, 0 outside, in between near the holes of an open one. Beyond WINDING_EXACT
+    triangles, points go by batches of neighbours: the triangles of the WINDING_CELL cells
+    within 3√3 cells of a batch exactly, the farther cells as dipoles, their vector area N
+    at their centroid x: Ω ≈ N·(x - q)/|x - q|³ (a 19,000-triangle mesh of G1: 40 s -> 3 s;
+    off by a few 0.01 at most)."""
+    points = np.asarray(points, dtype=float)
+    if len(corners) <= WINDING_EXACT:
+        return _solid_angles(points, corners) / (4 * np.pi)
+    cell = np.floor(corners.mean(axis=1) / WINDING_CELL).astype(np.int64)
+    _, owner = np.unique(cell, axis=0, return_inverse=True)
+    owner = owner.ravel()
+    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+    area = 0.5 * np.cross(b - a, c - a)  # (m, 3) vector areas
+    n_cells = int(owner.max()) + 1
+    N = np.zeros((n_cells, 3))
+    np.add.at(N, owner, area)
+    weight = np.linalg.norm(area, axis=1) + 1e-30
+    X = np.zeros((n_cells, 3))
+    np.add.at(X, owner, corners.mean(axis=1) * weight[:, None])
+    X /= np.maximum(np.bincount(owner, weights=weight, minlength=n_cells), 1e-30)[:, None]
+    out = np.zeros(len(points))
+    order = np.lexsort(np.floor(points / (4 * WINDING_CELL)).astype(np.int64).T[::-1])
+    near_reach = 3 * np.sqrt(3) * WINDING_CELL
+    for s in range(0, len(order), 64):
+        idx = order[s : s + 64]
+        q = points[idx]
+        lo, hi = q.min(axis=0) - near_reach, q.max(axis=0) + near_reach
+        near = np.all((X >= lo) & (X <= hi), axis=1)
+        exact = near[owner]
+        omega = _solid_angles(q, corners[exact])
+        u = X[~near][None] - q[:, None]  # (k, far, 3)
+        r3 = np.linalg.norm(u, axis=2) ** 3
+        omega += np.einsum("kfi,fi->k", u / r3[:, :, None], N[~near])
+        out[idx] = omega / (4 * np.pi)
+    return out
+
+
+def _solid_angles(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """(k,) the sum of the signed solid angles [sr] of triangles (m, 3, 3) seen from each
+    point (k, 3) (Van Oosterom-Strackee)."""
     out = np.zeros(len(points))
     A, B, C = (np.ascontiguousarray(corners[:, i, :].T) for i in range(3))  # (3, m) each
     for s in range(0, len(points), 64):
@@ -315,7 +358,7 @@ def winding_number(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
         det = (a * bc).sum(axis=1)
         den = la * lb * lc + (a * b).sum(axis=1) * lc + (b * c).sum(axis=1) * la
         den += (c * a).sum(axis=1) * lb
-        out[s : s + 64] = np.arctan2(det, den).sum(axis=1) / (2 * np.pi)
+        out[s : s + 64] = 2 * np.arctan2(det, den).sum(axis=1)
     return out
 
 
