@@ -158,6 +158,10 @@ def box_distances(pm: ProxyModel, centers: np.ndarray, boxes: list[EnvBox]) -> n
 # --------------------------------------------------------------------------- the first start
 SEPARATION = 0.03  # [m] how far above its clearance the first start puts each close pair
 SEPARATED_PER_LINK = 2  # the closest sphere pairs of each joint pair that the start parts
+# steps of the start, each at most this far on any joint [rad]: a full step moved Talos' left
+# shoulder far enough to put its wrist 3 cm into its thigh, unseen until the next step
+SEPARATION_STEPS = 6
+SEPARATION_STEP = 0.1
 
 
 def separated_start(
@@ -169,12 +173,12 @@ def separated_start(
     contact_joints: list[int],
 ) -> np.ndarray:
     """Joints (nj,) of q moved so that the candidate joint pairs ``links`` (indices into
-    ``pm.joint_pairs``) closer than their clearance (:meth:`ProxyModel.pair_clearance`) +
-    SEPARATION are about that far apart: three damped least-norm steps
-    Δq = Aᵀ(AAᵀ + 1e-4·I)⁻¹ b over the joints that carry no contact (the chains from the
-    base to ``contact_joints`` stay), A the distance gradients n·(J_a - J_b) of each joint
-    pair's SEPARATED_PER_LINK closest sphere pairs, b their shortfalls; clipped to the joint
-    limits.
+    ``pm.joint_pairs``) closer than the margin + SEPARATION are about that far apart (those
+    closer than the margin at the reference posture: no closer than there): SEPARATION_STEPS damped least-norm steps
+    Δq = Aᵀ(AAᵀ + 1e-4·I)⁻¹ b (scaled down to SEPARATION_STEP) over the joints that carry no
+    contact (the chains from the base to ``contact_joints`` stay), A the distance gradients
+    n·(J_a - J_b) of each joint pair's SEPARATED_PER_LINK closest sphere pairs, b their
+    shortfalls; clipped to the joint limits.
 
     IPOPT starts there instead of at q (the posture cost still pulls towards q). In
     half-sitting Talos' forearms are 4 mm above the 1 cm margin from its thighs, and the first
@@ -204,8 +208,9 @@ def separated_start(
     q = np.array(q, dtype=float)
     if movable.size == 0 or len(links) == 0:
         return q[7:]  # nothing to part: not worth a cache entry
-    target = pm.pair_clearance(margin) + SEPARATION  # (P,)
-    for _ in range(3):
+    held = pm.pair_clearance(margin)  # (P,) pairs tighter at the reference are left there
+    target = np.where(pm.clearance < margin, held, held + SEPARATION)
+    for _ in range(SEPARATION_STEPS):
         pin.forwardKinematics(model, data, q)
         centers = pm.centers_world(model, data)
         near = closest(pm.close_pairs(centers, target, links), SEPARATED_PER_LINK)
@@ -222,7 +227,7 @@ def separated_start(
             break
         A, b = np.array(rows), np.array(short)
         step = A.T @ np.linalg.solve(A @ A.T + 1e-4 * np.eye(len(b)), b)
-        q[movable_q] += step
+        q[movable_q] += step * min(1.0, SEPARATION_STEP / max(np.abs(step).max(), 1e-12))
         q[7:] = np.clip(q[7:], robot.q_lower, robot.q_upper)
     if len(_SEPARATED) >= 64:
         _SEPARATED.clear()
