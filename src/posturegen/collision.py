@@ -27,7 +27,8 @@ Lagrangian with 150 self pairs.
 
 Rows are kept few by an active set: of the pairs closer than ``activation`` beyond their
 clearance (self pairs; ``environment_activation`` beyond the margin for sphere-box pairs) at
-the current posture, the ACTIVE_PER_LINK closest of each pair of links enter the program;
+the current posture, the closest few of each pair of links enter the program
+(:mod:`posturegen.active_set`);
 after a solve every candidate pair is checked and the violated ones are added (as many per
 pair of links) before solving again (:func:`posturegen.solve.solve`).
 """
@@ -174,11 +175,11 @@ def separated_start(
 ) -> np.ndarray:
     """Joints (nj,) of q moved so that the candidate joint pairs ``links`` (indices into
     ``pm.joint_pairs``) closer than the margin + SEPARATION are about that far apart (those
-    closer than the margin at the reference posture: no closer than there): SEPARATION_STEPS damped least-norm steps
-    Δq = Aᵀ(AAᵀ + 1e-4·I)⁻¹ b (scaled down to SEPARATION_STEP) over the joints that carry no
-    contact (the chains from the base to ``contact_joints`` stay), A the distance gradients
-    n·(J_a - J_b) of each joint pair's SEPARATED_PER_LINK closest sphere pairs, b their
-    shortfalls; clipped to the joint limits.
+    closer than the margin at the reference posture: no closer than there):
+    SEPARATION_STEPS damped least-norm steps Δq = Aᵀ(AAᵀ + 1e-4·I)⁻¹ b (scaled down to
+    SEPARATION_STEP) over the joints that carry no contact (the chains from the base to
+    ``contact_joints`` stay), A the distance gradients n·(J_a - J_b) of each joint pair's
+    SEPARATED_PER_LINK closest sphere pairs, b their shortfalls; clipped to the joint limits.
 
     IPOPT starts there instead of at q (the posture cost still pulls towards q). In
     half-sitting Talos' forearms are 4 mm above the 1 cm margin from its thighs, and the first
@@ -274,10 +275,6 @@ SOFT_MIN_BETA = 1000.0
 # left unsaturated: the far ones' barrier keeps the arm off the body on its way, and saturated
 # at 5 or 10 cm talos-near-body-collision took 1-2 more median iterations.
 ENV_SATURATION = 0.05
-# the closest sphere pairs of each pair of links (and spheres of each link near each box) that
-# enter the program in one active-set round: proxies fitted to 1 cm put thousands of sphere
-# pairs within reach of each other (Talos' legs at half-sitting: 4,000 within 6 cm)
-ACTIVE_PER_LINK = 16
 
 
 def _held(margin: Any, clearance: float) -> Any:
