@@ -97,12 +97,12 @@ def test_a_hand_edited_exclusion_list_does_not_verify_a_colliding_posture(
     posture = _as_checked(squat_without_avoidance)
     model = talos.model
     hits = brute_force_intersections(posture)
+    geometry = talos.collision_model()
     joints = set()
     for hit in hits:
-        a, b = hit.split("/")
-        ja = model.names[int(talos.collision_model().getGeometryObject(a).parentJoint)]
-        jb = model.names[int(talos.collision_model().getGeometryObject(b).parentJoint)]
-        joints.add(tuple(sorted((ja, jb))))
+        a, b = (geometry.geometryObjects[geometry.getGeometryId(n)] for n in hit.split("/"))
+        joints.add(tuple(sorted((model.names[a.parentJoint], model.names[b.parentJoint]))))
+    assert joints, "the squat without avoidance must intersect somewhere"
     for reason in ("srdf", "reference_overlap", "adjacent"):
         edited = copy.deepcopy(posture)
         edited["collision"]["unchecked"] += [{"pair": list(p), "reason": reason} for p in joints]
