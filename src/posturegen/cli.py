@@ -32,14 +32,17 @@ def _solve_to(problem_path: Path, out: Path, quiet: bool = False, png: str | Non
     from .spec import load_problem
 
     problem = load_problem(problem_path)
-    result = solve(problem)
+    result = solve(problem, diagnose=True)
     path = result.write(out / "posture.json")
+    effort = (
+        f"IPOPT {result.status}, {result.iterations} iterations, "
+        f"{1e3 * result.solve_time_s:.1f} ms (+{1e3 * result.build_time_s:.0f} ms build)"
+    )
+    if not result.success:  # one line on stderr: what blocks it
+        print(f"posturegen: no posture: {result.diagnosis} ({effort})", file=sys.stderr)
+    elif not quiet:
+        print(f"verified posture: {effort}")
     if not quiet:
-        state = "verified posture" if result.success else "NO POSTURE"
-        print(
-            f"{state}: {result.message}; IPOPT {result.status}, {result.iterations} iterations, "
-            f"{1e3 * result.solve_time_s:.1f} ms (+{1e3 * result.build_time_s:.0f} ms build)"
-        )
         print(f"wrote {path}")
     if png is not None:
         from .viz import render_png
@@ -165,12 +168,10 @@ def _run_sequence(seq: dict, out: Path, quiet: bool, png: str | None, final: boo
             print(f"{report.name} on {robot}: every stage verified")
         return EXIT_OK
     print(
-        f"posturegen: {report.name} on {robot}: no verified posture at stage "
-        f"'{last.name}' ({last.result.message}); nothing after it was solved",
+        f"posturegen: {report.name} on {robot}: no posture at stage '{last.name}': "
+        f"{last.diagnosis or last.result.message}; nothing after it was solved",
         file=sys.stderr,
     )
-    if last.diagnosis:
-        print(f"posturegen: diagnosis: {last.diagnosis}", file=sys.stderr)
     return EXIT_NOT_FOUND
 
 

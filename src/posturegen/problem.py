@@ -21,6 +21,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from .elastic import Elastic, soften
 from .errors import SolveError
 from .kinematics import CasadiKinematics, KinematicState, so3_exp
 from .robot import Robot
@@ -347,6 +348,9 @@ class Problem:
     collision_options: Any = None  # posturegen.collision.CollisionOptions; None: no avoidance
     # the active collision rows of the current solve (set by posturegen.solve)
     collision_term: Term | None = None
+    # hard rows relaxed by L1-penalized slacks (posturegen.elastic; the diagnosis of a
+    # failure solves a copy of the problem with it); None: the real program
+    elastic: Elastic | None = None
 
     def terms(self) -> list[Term]:
         """Every term in declaration order."""
@@ -363,8 +367,13 @@ class Problem:
         ]
 
     def key(self) -> tuple[Any, ...]:
-        """The structure key: robot plus each term's key plus solver options."""
-        return (id(self.robot.model), tuple(t.key() for t in self.terms()), self.solver_options)
+        """The structure key: robot, each term's key, the elastic relaxation, solver options."""
+        return (
+            id(self.robot.model),
+            tuple(t.key() for t in self.terms()),
+            self.elastic,
+            self.solver_options,
+        )
 
     def compile(self) -> CompiledNLP:
         """The compiled program for this structure and these solver options (built once, then
@@ -416,7 +425,7 @@ class Problem:
 
     def _program(self) -> _Program:
         """The symbolic program of this structure (declared once, then cached)."""
-        key = self.key()[:2]
+        key = self.key()[:3]
         if key in _PROGRAMS:
             _PROGRAMS.move_to_end(key)
             return _PROGRAMS[key]
@@ -424,6 +433,8 @@ class Problem:
         ctx = BuildContext(robot=self.robot, nlp=nlp, kin=self.robot.kinematics)
         for term in self.terms():
             term.declare(ctx)
+        if self.elastic is not None:
+            soften(nlp, self.elastic)
         x = ca.vertcat(*[v[0] for v in nlp.x.values()])
         p = ca.vertcat(*nlp.p.values()) if nlp.p else ca.SX(0, 1)
         g = ca.vertcat(*[v[0] for v in nlp.g.values()])

@@ -16,6 +16,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from . import diagnose as diagnosis
+from .elastic import Elastic
 from .kinematics import scratch_data
 from .problem import _CACHE, Problem
 from .verify import SCHEMA, VerifyReport, verify_posture
@@ -48,6 +50,8 @@ class Result:
     cost: float
     verification: VerifyReport
     posture: dict[str, Any]  # the posture-file content
+    # why no posture was found, one line (solve(..., diagnose=True)); "" when not diagnosed
+    diagnosis: str = ""
 
     @property
     def max_violation(self) -> float:
@@ -84,13 +88,20 @@ def _run_ipopt(
     lam_x0: np.ndarray | None = None,
     lam_g0: dict[str, np.ndarray] | None = None,
     joints0: np.ndarray | None = None,
+    layout: dict[str, slice] | None = None,
 ) -> _Run:
     """One IPOPT run; with ``lam_g0`` (multipliers per constraint block) a warm start; without
-    ``x0``, the problem's initial guess with ``joints0`` (nj,) for the joints when given."""
+    ``x0``, the problem's initial guess with ``joints0`` (nj,) for the joints when given.
+    ``layout``: the variable blocks of ``x0`` and ``lam_x0`` when they may differ from this
+    program's (an elastic program's collision slacks grow with the active set)."""
     built_before = problem.key() in _CACHE
     compiled = problem.compile()
     compiled.refresh()  # generated C once it is built (posturegen.codegen)
     x_init, p, lbg, ubg = problem.numeric(compiled)
+    if x0 is not None and layout is not None and layout != compiled.x_index:
+        x0 = _carried(x0, layout, compiled.x_index, x_init)
+        if lam_x0 is not None:
+            lam_x0 = _carried(lam_x0, layout, compiled.x_index, np.zeros_like(x_init))
     if x0 is not None and x0.shape == x_init.shape:
         x_init = x0
     elif joints0 is not None:
@@ -120,6 +131,19 @@ def _run_ipopt(
         lam_x=np.array(sol["lam_x"]).ravel(),
         lam_g=np.array(sol["lam_g"]).ravel(),
     )
+
+
+def _carried(
+    values: np.ndarray, old: dict[str, slice], new: dict[str, slice], default: np.ndarray
+) -> np.ndarray:
+    """``values`` laid out by the blocks ``old``, moved to the blocks ``new`` (the blocks of
+    another size, or new ones, from ``default``)."""
+    out = default.copy()
+    for name, sl in new.items():
+        src = old.get(name)
+        if src is not None and src.stop - src.start == sl.stop - sl.start:
+            out[sl] = values[src]
+    return out
 
 
 def _block_multipliers(run: _Run, term: Any) -> dict[str, np.ndarray]:
@@ -172,7 +196,7 @@ COLLISION_PERTURBATION: tuple[float, float] | None = (1e-3, 10.0)
 TORQUE_CONTINUATION = 2.0
 
 
-def solve(problem: Problem, x0: np.ndarray | None = None) -> Result:
+def solve(problem: Problem, x0: np.ndarray | None = None, *, diagnose: bool = False) -> Result:
     """Solve the posture problem and verify the posture; never raises for 'not found'.
 
     With collision avoidance, IPOPT runs in an active-set loop (see posturegen.collision):
@@ -182,8 +206,16 @@ def solve(problem: Problem, x0: np.ndarray | None = None) -> Result:
     The pairs used are remembered per problem structure; the next problem of that structure
     starts with them. When IPOPT does not converge, two continuations follow: without the
     collision rows, then with the torque limits relaxed, each solution starting the real
-    program again. The Result counts every IPOPT run."""
+    program again. The Result counts every IPOPT run. With ``diagnose``, a failure is
+    explained (``Result.diagnosis`` and the posture file's ``diagnosis``): see
+    :func:`diagnosed`."""
     x_start = None if x0 is None else np.asarray(x0, dtype=float)
+    result = _solve(problem, x_start)
+    return diagnosed(problem, result) if diagnose and not result.success else result
+
+
+def _solve(problem: Problem, x_start: np.ndarray | None) -> Result:
+    """:func:`solve` without the diagnosis."""
     result, runs = _solve_continued(problem, x_start, [])
     effort = problem.robot.effort_limit
     if result.success or result.status in _IPOPT_OK or not np.any(np.isfinite(effort)):
@@ -198,6 +230,67 @@ def solve(problem: Problem, x0: np.ndarray | None = None) -> Result:
         return result
     retry, _ = _solve_continued(problem, relaxed_runs[-1].x, relaxed_runs)
     return retry if retry.success else result
+
+
+def diagnosed(problem: Problem, result: Result) -> Result:
+    """A failed ``result`` of ``problem`` with its diagnosis (:mod:`posturegen.diagnose`):
+    when IPOPT did not converge, the rows that a copy of the problem with its tasks, torque
+    limits, contact, friction and collision rows relaxed (:mod:`posturegen.elastic`, started
+    from the problem's initial posture) had to move; when the re-check rejected IPOPT's
+    posture, the failed checks."""
+    if result.status in _IPOPT_OK:
+        found = diagnosis.from_rejection(result.verification)
+    else:
+        found = diagnosis.from_relaxed(_solve_elastic(problem))
+    posture = {**result.posture, "diagnosis": found.to_dict()}
+    return dataclasses.replace(result, diagnosis=found.line, posture=posture)
+
+
+# the diagnosis' second stage: only the collision rows relaxed
+COLLISION_ONLY = Elastic(weights=(("collision", 100.0),))
+
+
+def _solve_elastic(problem: Problem) -> diagnosis.Relaxed:
+    """The elastic solve of the diagnosis, on copies of ``problem`` (not written on): first
+    every task, torque limit, contact and friction row relaxed, without collision avoidance;
+    when that needs no row to move and the problem avoids collisions, only the collision rows
+    relaxed, from that posture (so that what only a collision blocks is named as such, and
+    a foot fixed inside a box is not reported as the foot moving away from it)."""
+    first = _elastic_run(problem, Elastic(), None, None)
+    opts = problem.collision_options
+    if opts is None or diagnosis.causes(first) or not first.converged:
+        return first
+    return _elastic_run(problem, COLLISION_ONLY, dataclasses.replace(opts, tighten=0), first)
+
+
+def _elastic_run(
+    problem: Problem, elastic: Elastic, opts: Any, start: diagnosis.Relaxed | None
+) -> diagnosis.Relaxed:
+    """One elastic solve of a copy of ``problem`` with collision options ``opts`` (the
+    active-set loop when given), from the problem's initial guess or ``start``'s solution."""
+    relaxed = dataclasses.replace(
+        problem, elastic=elastic, collision_term=None, collision_options=opts
+    )
+    x0, layout = (None, None) if start is None else (start.x, start.x_index)
+    if opts is None:
+        run = _run_ipopt(relaxed, x0, layout=layout)
+    else:
+        run = _solve_avoiding(relaxed, x0, [], layout)[1][-1]
+    return diagnosis.Relaxed(
+        relaxed,
+        run.x,
+        run.compiled.x_index,
+        _outputs(run),
+        configuration_from_x(relaxed, run.compiled, run.x),
+        run.status,
+        run.status in _IPOPT_OK,
+    )
+
+
+def _outputs(run: _Run) -> dict[str, np.ndarray]:
+    """The program's outputs at a run's solution, flattened (column-major)."""
+    out = run.compiled.outputs(x=run.x, p=run.p)
+    return {k: np.array(v).ravel(order="F") for k, v in out.items()}
 
 
 def _solve_continued(
@@ -230,10 +323,14 @@ def _solve_continued(
 
 
 def _solve_avoiding(
-    problem: Problem, x0: np.ndarray | None, prior: list[_Run]
+    problem: Problem,
+    x0: np.ndarray | None,
+    prior: list[_Run],
+    layout: dict[str, slice] | None = None,
 ) -> tuple[Result, list[_Run]]:
-    """The active-set loop of :func:`solve` from ``x0``; ``prior`` runs count in the
-    Result's iterations and times. Returns the Result and every run so far."""
+    """The active-set loop of :func:`solve` from ``x0`` (laid out as ``layout``, default
+    this program's); ``prior`` runs count in the Result's iterations and times. Returns the
+    Result and every run so far."""
     runs: list[_Run] = []
     opts = problem.collision_options
     from .collision import (
@@ -322,11 +419,16 @@ def _solve_avoiding(
                 problem.collision_term = term
                 if lam is None:
                     problem.solver_options = cold_run
-                    run = _run_ipopt(problem, x_warm, joints0=joints0)
+                    x_layout = runs[-1].compiled.x_index if runs else layout
+                    run = _run_ipopt(problem, x_warm, joints0=joints0, layout=x_layout)
                 else:
                     problem.solver_options = dataclasses.replace(cold_run, warm_start=True)
                     run = _run_ipopt(
-                        problem, x_warm, runs[-1].lam_x, _map_collision_multipliers(lam, term)
+                        problem,
+                        x_warm,
+                        runs[-1].lam_x,
+                        _map_collision_multipliers(lam, term),
+                        layout=runs[-1].compiled.x_index,
                     )
                 runs.append(run)
                 if run.status not in _IPOPT_OK:
@@ -388,8 +490,7 @@ def _excluded_pairs(problem: Problem) -> set[tuple[int, int]]:
 def _result(problem: Problem, runs: list[_Run], margin: float | None = None) -> Result:
     """The Result of the last run (times and iterations summed over every run)."""
     run = runs[-1]
-    out = run.compiled.outputs(x=run.x, p=run.p)
-    outputs = {k: np.array(v).ravel(order="F") for k, v in out.items()}
+    outputs = _outputs(run)
     q = configuration_from_x(problem, run.compiled, run.x)
     torques = outputs["torques"]
     posture = posture_dict(problem, q, torques, outputs, margin)
@@ -418,6 +519,7 @@ def _result(problem: Problem, runs: list[_Run], margin: float | None = None) -> 
             "solve_time_s": solve_time,
             "ipopt_runs": len(runs),
             "max_violation": report.max_violation,
+            "diagnosis": None,
             "checks": {
                 c.name: {"value": c.value, "tolerance": c.tolerance, "ok": c.ok}
                 for c in report.checks
