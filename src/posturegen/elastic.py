@@ -11,9 +11,9 @@ The weights say which rows the diagnosis blames when several could move: 1 cm of
 of a proxy distance costs as much as 10 % of a torque limit or 10 % of the robot's weight
 outside a friction cone (the robot's limits are what a posture beyond them needs, and a target
 is beyond reach only where more torque would not reach it), a contact's placement three times
-more (a target out of reach is reported as such rather than as both feet moving towards it). Weights are per unit of the row: torque rows
-are τ/effort, friction rows are forces over the robot's weight, the others metres
-(orientations: sines of angles).
+more (a target out of reach is reported as such rather than as both feet moving towards it).
+Weights are per unit of the row: torque rows are τ/effort, friction rows are forces over the
+robot's weight, the others metres (orientations: sines of angles).
 """
 
 from __future__ import annotations
