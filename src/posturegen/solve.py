@@ -248,6 +248,8 @@ def diagnosed(problem: Problem, result: Result) -> Result:
 
 # the diagnosis' second stage: only the collision rows relaxed
 COLLISION_ONLY = Elastic(weights=(("collision", 100.0),))
+# IPOPT iterations of an elastic solve at least (a problem's max_iter limits its own solve)
+ELASTIC_MAX_ITER = 300
 
 
 def _solve_elastic(problem: Problem) -> diagnosis.Relaxed:
@@ -268,8 +270,13 @@ def _elastic_run(
 ) -> diagnosis.Relaxed:
     """One elastic solve of a copy of ``problem`` with collision options ``opts`` (the
     active-set loop when given), from the problem's initial guess or ``start``'s solution."""
+    solver = problem.solver_options
     relaxed = dataclasses.replace(
-        problem, elastic=elastic, collision_term=None, collision_options=opts
+        problem,
+        elastic=elastic,
+        collision_term=None,
+        collision_options=opts,
+        solver_options=dataclasses.replace(solver, max_iter=max(solver.max_iter, ELASTIC_MAX_ITER)),
     )
     x0, layout = (None, None) if start is None else (start.x, start.x_index)
     if opts is None:
