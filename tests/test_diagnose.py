@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from posturegen.cli import _demo_dir, main
 from posturegen.contacts import FrictionModel
-from posturegen.diagnose import Diagnosis, from_rejection, required_mu
+from posturegen.diagnose import Diagnosis, diagnose, from_rejection, required_mu
 from posturegen.elastic import Elastic, category
 from posturegen.solve import solve
 from posturegen.spec import problem_from_dict
@@ -43,7 +43,8 @@ def _problem(edit: dict) -> dict:
 
 
 def _diagnose(data: dict) -> tuple[object, dict]:
-    result = solve(problem_from_dict(data), diagnose=True)
+    problem = problem_from_dict(data)
+    result = diagnose(problem, solve(problem))
     assert not result.success
     d = result.posture["diagnosis"]
     assert d["summary"] == result.diagnosis and "\n" not in result.diagnosis
@@ -147,7 +148,7 @@ def test_diagnosis_leaves_the_problem_as_it_was():
     problem = problem_from_dict(_problem({"tasks.0.target": [1.5, -0.35, 0.9]}))
     key = problem.key()
     first = solve(problem)
-    diagnosed = solve(problem, diagnose=True)
+    diagnosed = diagnose(problem, first)
     assert problem.elastic is None and problem.key() == key
     assert first.diagnosis == "" and first.posture["diagnosis"] is None
     np.testing.assert_array_equal(first.q, diagnosed.q)

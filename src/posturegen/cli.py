@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from .errors import PosturegenError
+from .hints import with_hint
 
 EXIT_OK, EXIT_NOT_FOUND, EXIT_INPUT = 0, 1, 2
 
@@ -28,11 +29,10 @@ def demo_names() -> list[str]:
 
 
 def _solve_to(problem_path: Path, out: Path, quiet: bool = False, png: str | None = None) -> int:
-    from .solve import solve
+    from .diagnose import solve_diagnosed
     from .spec import load_problem
 
-    problem = load_problem(problem_path)
-    result = solve(problem, diagnose=True)
+    result = solve_diagnosed(load_problem(problem_path))
     path = result.write(out / "posture.json")
     effort = (
         f"IPOPT {result.status}, {result.iterations} iterations, "
@@ -92,7 +92,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         return EXIT_OK
     known = sorted(set(names) | set(SCENES))
     if args.name not in known:
-        raise PosturegenError(f"demo: unknown demo '{args.name}' (known: {', '.join(known)})")
+        hint = with_hint(args.name, known, f"known: {', '.join(known)}")
+        raise PosturegenError(f"demo: unknown demo '{args.name}' ({hint})")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.name in names and args.robot is None:
@@ -108,7 +109,8 @@ def cmd_climb(args: argparse.Namespace) -> int:
 
     climbs = [n for n, info in SCENES.items() if info.climb_steps is not None]
     if args.scene not in climbs:
-        raise PosturegenError(f"climb: unknown climb '{args.scene}' (known: {', '.join(climbs)})")
+        hint = with_hint(args.scene, climbs, f"known: {', '.join(climbs)}")
+        raise PosturegenError(f"climb: unknown climb '{args.scene}' ({hint})")
     steps = args.steps if args.steps is not None else SCENES[args.scene].climb_steps
     if steps is None or steps < 1:
         raise PosturegenError("--steps: expected an integer >= 1 (steps of each foot)")
@@ -221,9 +223,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
     names = args.family or list(FAMILIES)
     for name in names:
         if name not in FAMILIES:
-            raise PosturegenError(
-                f"--family: unknown family '{name}' (known: {', '.join(FAMILIES)})"
-            )
+            hint = with_hint(name, FAMILIES, f"known: {', '.join(FAMILIES)}")
+            raise PosturegenError(f"--family: unknown family '{name}' ({hint})")
 
     def show(rep: FamilyReport) -> None:
         print(rep.line(), flush=True)

@@ -1,12 +1,14 @@
 """Why no posture was found: the rows an elastic solve had to move, in physical units.
 
-When IPOPT does not converge, :func:`posturegen.solve.solve` (with ``diagnose=True``) solves a
-copy of the problem whose tasks, torque limits, contact rows, friction cones and collision rows
-are relaxed by L1-penalized slacks (:mod:`posturegen.elastic`; the static equilibrium stays
-hard). :func:`from_relaxed` turns the positive slacks of that solution into causes, each one
-sentence with its amount: ``target of task 0 is 0.37 m beyond reach of
-gripper_right_base_link``, ``torque limit of leg_left_4_joint exceeded by 35 %``. When IPOPT
-converged but the re-check rejected its posture, :func:`from_rejection` names the failed checks.
+``diagnose(problem, solve(problem))``: when IPOPT did not converge, a copy of the problem whose
+tasks, torque limits, contact rows and friction cones are relaxed by L1-penalized slacks
+(:mod:`posturegen.elastic`; the static equilibrium stays hard) is solved without collision
+avoidance; when no row had to move there and the problem avoids collisions, a copy with only
+its collision rows relaxed is solved from that posture. :func:`from_relaxed` turns the
+positive slacks into causes, each one sentence with its amount: ``target of task 0 is 0.37 m
+beyond reach of gripper_right_base_link``, ``torque limit of leg_left_4_joint exceeded by
+35 %``. When IPOPT converged but the re-check rejected its posture, :func:`from_rejection`
+names the failed checks. The problem itself is not written on.
 """
 
 from __future__ import annotations
@@ -21,6 +23,15 @@ import pinocchio as pin
 from .collision import self_distances
 from .elastic import Elastic, slack_values
 from .kinematics import scratch_data
+from .solve import (
+    _IPOPT_OK,
+    Result,
+    _outputs,
+    _run_ipopt,
+    _solve_avoiding,
+    configuration_from_x,
+    solve,
+)
 
 # slacks below these are the L1 penalty's noise, not causes
 TOL_LENGTH = 1e-3  # [m]
@@ -101,6 +112,67 @@ class Relaxed:
     def elastic(self) -> Elastic:
         """The relaxation's weights."""
         return self.problem.elastic
+
+
+# the second stage: only the collision rows relaxed
+COLLISION_ONLY = Elastic(weights=(("collision", 100.0),))
+# IPOPT iterations of an elastic solve at least (a problem's max_iter limits its own solve)
+ELASTIC_MAX_ITER = 300
+
+
+def diagnose(problem: Any, result: Result) -> Result:
+    """``result`` (a failed solve of ``problem``, a :class:`posturegen.problem.Problem`) with
+    its diagnosis: ``Result.diagnosis`` (one line) and the posture file's ``diagnosis``
+    (:meth:`Diagnosis.to_dict`); a success is returned as it is."""
+    if result.success:
+        return result
+    if result.status in _IPOPT_OK:
+        found = from_rejection(result.verification)
+    else:
+        found = from_relaxed(relax(problem))
+    posture = {**result.posture, "diagnosis": found.to_dict()}
+    return replace(result, diagnosis=found.line, posture=posture)
+
+
+def solve_diagnosed(problem: Any) -> Result:
+    """:func:`posturegen.solve.solve`, and the diagnosis of a failure: what the command line
+    runs."""
+    return diagnose(problem, solve(problem))
+
+
+def relax(problem: Any) -> Relaxed:
+    """The elastic solve, on copies of ``problem``: first every task, torque limit, contact
+    and friction row relaxed, without collision avoidance; when that needs no row to move and
+    the problem avoids collisions, only the collision rows relaxed, from that posture (so that
+    what only a collision blocks is named as such, and a foot fixed inside a box is not
+    reported as the foot moving away from it)."""
+    first = _elastic_run(problem, Elastic(), None, None)
+    opts = problem.collision_options
+    if opts is None or causes(first) or not first.converged:
+        return first
+    return _elastic_run(problem, COLLISION_ONLY, replace(opts, tighten=0), first)
+
+
+def _elastic_run(problem: Any, elastic: Elastic, opts: Any, start: Relaxed | None) -> Relaxed:
+    """One elastic solve of a copy of ``problem`` with collision options ``opts`` (the
+    active-set loop when given, without margin growth), from the problem's initial guess or
+    ``start``'s solution."""
+    solver = problem.solver_options
+    relaxed = replace(
+        problem,
+        elastic=elastic,
+        collision_term=None,
+        collision_options=opts,
+        solver_options=replace(solver, max_iter=max(solver.max_iter, ELASTIC_MAX_ITER)),
+    )
+    x0, layout = (None, None) if start is None else (start.x, start.x_index)
+    if opts is None:
+        run = _run_ipopt(relaxed, x0, layout=layout)
+    else:
+        run = _solve_avoiding(relaxed, x0, [], layout)[1][-1]
+    q = configuration_from_x(relaxed, run.compiled, run.x)
+    converged = run.status in _IPOPT_OK
+    return Relaxed(relaxed, run.x, run.compiled.x_index, _outputs(run), q, run.status, converged)
 
 
 def from_relaxed(relaxed: Relaxed) -> Diagnosis:

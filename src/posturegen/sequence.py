@@ -31,6 +31,7 @@ import yaml
 
 from . import _fields as F
 from .contacts import FixedContact, FloatingContact
+from .diagnose import diagnose as diagnosed
 from .errors import InputError
 from .problem import Problem
 from .robot import load_robot
@@ -88,6 +89,7 @@ def placed_initial(robot_spec: Any, base: Any, field_name: str = "initial.base")
     the first stage's contacts decide the height)."""
     robot = load_robot(robot_spec)
     b = F.vector(base, 3, field_name)
+    F.angle(b[2], f"{field_name}[2]")
     q = robot.q_init.copy()
     q[0:2] = b[0:2]
     R0 = pin.Quaternion(q[3:7]).normalized().matrix()
@@ -184,8 +186,8 @@ def run_sequence(
 
     ``progress(k, n, stage_name, report)`` is called before (report None) and after each
     stage. A failed stage ends the sequence (its posture file is still written); with
-    ``diagnose`` its report and posture file say what blocks it (``solve(..., diagnose=True)``,
-    :mod:`posturegen.diagnose`)."""
+    ``diagnose`` its report and posture file say what blocks it
+    (:func:`posturegen.diagnose.diagnose`)."""
     seq = F.require_mapping(seq, "sequence")
     F.check_keys(
         seq,
@@ -208,7 +210,9 @@ def run_sequence(
         t0 = time.perf_counter()
         data = stage_problem_dict(seq, stage, k, previous, q_prev)
         problem = problem_from_dict(data)
-        result = solve(problem, diagnose=diagnose)
+        result = solve(problem)
+        if diagnose:
+            result = diagnosed(problem, result)
         wall = time.perf_counter() - t0
         stem = f"{k:02d}-{_slug(name)}"
         (out / f"{stem}.yaml").write_text(yaml.safe_dump(data, sort_keys=False))

@@ -16,8 +16,6 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from . import diagnose as diagnosis
-from .elastic import Elastic
 from .kinematics import scratch_data
 from .problem import _CACHE, Problem
 from .verify import SCHEMA, VerifyReport, verify_posture
@@ -50,7 +48,7 @@ class Result:
     cost: float
     verification: VerifyReport
     posture: dict[str, Any]  # the posture-file content
-    # why no posture was found, one line (solve(..., diagnose=True)); "" when not diagnosed
+    # why no posture was found, one line (posturegen.diagnose.diagnose); "" when not diagnosed
     diagnosis: str = ""
 
     @property
@@ -196,7 +194,7 @@ COLLISION_PERTURBATION: tuple[float, float] | None = (1e-3, 10.0)
 TORQUE_CONTINUATION = 2.0
 
 
-def solve(problem: Problem, x0: np.ndarray | None = None, *, diagnose: bool = False) -> Result:
+def solve(problem: Problem, x0: np.ndarray | None = None) -> Result:
     """Solve the posture problem and verify the posture; never raises for 'not found'.
 
     With collision avoidance, IPOPT runs in an active-set loop (see posturegen.collision):
@@ -206,16 +204,9 @@ def solve(problem: Problem, x0: np.ndarray | None = None, *, diagnose: bool = Fa
     The pairs used are remembered per problem structure; the next problem of that structure
     starts with them. When IPOPT does not converge, two continuations follow: without the
     collision rows, then with the torque limits relaxed, each solution starting the real
-    program again. The Result counts every IPOPT run. With ``diagnose``, a failure is
-    explained (``Result.diagnosis`` and the posture file's ``diagnosis``): see
-    :func:`diagnosed`."""
+    program again. The Result counts every IPOPT run. Why a failure failed:
+    :func:`posturegen.diagnose.diagnose`."""
     x_start = None if x0 is None else np.asarray(x0, dtype=float)
-    result = _solve(problem, x_start)
-    return diagnosed(problem, result) if diagnose and not result.success else result
-
-
-def _solve(problem: Problem, x_start: np.ndarray | None) -> Result:
-    """:func:`solve` without the diagnosis."""
     result, runs = _solve_continued(problem, x_start, [])
     effort = problem.robot.effort_limit
     if result.success or result.status in _IPOPT_OK or not np.any(np.isfinite(effort)):
@@ -230,68 +221,6 @@ def _solve(problem: Problem, x_start: np.ndarray | None) -> Result:
         return result
     retry, _ = _solve_continued(problem, relaxed_runs[-1].x, relaxed_runs)
     return retry if retry.success else result
-
-
-def diagnosed(problem: Problem, result: Result) -> Result:
-    """A failed ``result`` of ``problem`` with its diagnosis (:mod:`posturegen.diagnose`):
-    when IPOPT did not converge, the rows that a copy of the problem with its tasks, torque
-    limits, contact, friction and collision rows relaxed (:mod:`posturegen.elastic`, started
-    from the problem's initial posture) had to move; when the re-check rejected IPOPT's
-    posture, the failed checks."""
-    if result.status in _IPOPT_OK:
-        found = diagnosis.from_rejection(result.verification)
-    else:
-        found = diagnosis.from_relaxed(_solve_elastic(problem))
-    posture = {**result.posture, "diagnosis": found.to_dict()}
-    return dataclasses.replace(result, diagnosis=found.line, posture=posture)
-
-
-# the diagnosis' second stage: only the collision rows relaxed
-COLLISION_ONLY = Elastic(weights=(("collision", 100.0),))
-# IPOPT iterations of an elastic solve at least (a problem's max_iter limits its own solve)
-ELASTIC_MAX_ITER = 300
-
-
-def _solve_elastic(problem: Problem) -> diagnosis.Relaxed:
-    """The elastic solve of the diagnosis, on copies of ``problem`` (not written on): first
-    every task, torque limit, contact and friction row relaxed, without collision avoidance;
-    when that needs no row to move and the problem avoids collisions, only the collision rows
-    relaxed, from that posture (so that what only a collision blocks is named as such, and
-    a foot fixed inside a box is not reported as the foot moving away from it)."""
-    first = _elastic_run(problem, Elastic(), None, None)
-    opts = problem.collision_options
-    if opts is None or diagnosis.causes(first) or not first.converged:
-        return first
-    return _elastic_run(problem, COLLISION_ONLY, dataclasses.replace(opts, tighten=0), first)
-
-
-def _elastic_run(
-    problem: Problem, elastic: Elastic, opts: Any, start: diagnosis.Relaxed | None
-) -> diagnosis.Relaxed:
-    """One elastic solve of a copy of ``problem`` with collision options ``opts`` (the
-    active-set loop when given), from the problem's initial guess or ``start``'s solution."""
-    solver = problem.solver_options
-    relaxed = dataclasses.replace(
-        problem,
-        elastic=elastic,
-        collision_term=None,
-        collision_options=opts,
-        solver_options=dataclasses.replace(solver, max_iter=max(solver.max_iter, ELASTIC_MAX_ITER)),
-    )
-    x0, layout = (None, None) if start is None else (start.x, start.x_index)
-    if opts is None:
-        run = _run_ipopt(relaxed, x0, layout=layout)
-    else:
-        run = _solve_avoiding(relaxed, x0, [], layout)[1][-1]
-    return diagnosis.Relaxed(
-        relaxed,
-        run.x,
-        run.compiled.x_index,
-        _outputs(run),
-        configuration_from_x(relaxed, run.compiled, run.x),
-        run.status,
-        run.status in _IPOPT_OK,
-    )
 
 
 def _outputs(run: _Run) -> dict[str, np.ndarray]:
