@@ -10,6 +10,7 @@ import json
 
 import casadi as ca
 import numpy as np
+import pytest
 import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -18,6 +19,7 @@ from posturegen.cli import _demo_dir, main
 from posturegen.contacts import FrictionModel
 from posturegen.diagnose import Diagnosis, diagnose, from_rejection, required_mu
 from posturegen.elastic import Elastic, category
+from posturegen.errors import ImplausibleValueWarning
 from posturegen.solve import solve
 from posturegen.spec import problem_from_dict
 from posturegen.verify import Check, VerifyReport
@@ -63,7 +65,8 @@ def test_target_out_of_reach_names_the_task_and_its_distance():
 
 
 def test_millimetre_target_is_named_as_such():
-    result, d = _diagnose(_problem({"tasks.0.target": [450, -350, 900]}))
+    with pytest.warns(ImplausibleValueWarning, match="millimetres"):
+        result, d = _diagnose(_problem({"tasks.0.target": [450, -350, 900]}))
     assert "beyond reach of gripper_right_base_link" in result.diagnosis
     assert "millimetres?" in result.diagnosis
     assert d["causes"][0]["amount"] > 1000
@@ -86,7 +89,8 @@ def test_contact_out_of_reach_names_the_contact():
     data = _problem({})
     data["surfaces"].append(WALL)
     data["contacts"].append(contact)
-    result, d = _diagnose(data)
+    with pytest.warns(ImplausibleValueWarning, match="farther than gripper_right_base_link"):
+        result, d = _diagnose(data)
     assert result.diagnosis.startswith(
         "contact 'left_hand' cannot reach its pose on surface 'wall' ("
     )

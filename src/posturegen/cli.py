@@ -10,10 +10,11 @@ import argparse
 import importlib.resources
 import json
 import sys
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-from .errors import PosturegenError
+from .errors import PosturegenError, PosturegenWarning
 from .hints import with_hint
 
 EXIT_OK, EXIT_NOT_FOUND, EXIT_INPUT = 0, 1, 2
@@ -306,12 +307,31 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _show_warning(
+    message: Warning | str,
+    category: type[Warning],
+    filename: str,
+    lineno: int,
+    file: object = None,
+    line: str | None = None,
+) -> None:
+    """posturegen's warnings as one line on stderr (``posturegen: warning: ...``), others as
+    Python shows them."""
+    if issubclass(category, PosturegenWarning):
+        print(f"posturegen: warning: {message}", file=sys.stderr)
+    else:
+        sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``posturegen`` console script."""
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args))
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", PosturegenWarning)
+            warnings.showwarning = _show_warning
+            return int(args.func(args))
     except PosturegenError as exc:
         print(f"posturegen: error: {exc}", file=sys.stderr)
         return EXIT_INPUT
