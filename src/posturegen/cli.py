@@ -61,9 +61,10 @@ def cmd_solve(args: argparse.Namespace) -> int:
 
 def cmd_inspect(args: argparse.Namespace) -> int:
     """posturegen inspect PROBLEM.yaml: the program's variables, constraints and costs."""
+    from .inspection import describe
     from .spec import load_problem
 
-    print(load_problem(Path(args.problem)).summary())
+    print(describe(load_problem(Path(args.problem))))
     return EXIT_OK
 
 

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from .activeset import box_label
 from .collision import self_distances
 from .elastic import Elastic, slack_values
 from .kinematics import scratch_data
@@ -388,18 +389,11 @@ def _collision_causes(r: Relaxed) -> Iterator[Cause]:
         more = len(links) - 3
         who += f" (and {more} more link{'s' if more > 1 else ''})" if more > 0 else ""
         pen = _penalty(r, "collision.env", s[rows])
-        cause = _collision_cause(who, _box_name(box.name), float(s[rows[0]]), term.margin, pen)
+        cause = _collision_cause(who, box_label(box), float(s[rows[0]]), term.margin, pen)
         inside = [t.index for t in r.problem.tasks if _obstacle_at([box], t.target) is not None]
         if inside and box.name in {o.name for o in r.problem.scene.obstacles}:
             cause = replace(cause, text=cause.text + f" (task {inside[0]}'s target is inside it)")
         yield cause
-
-
-def _box_name(name: str) -> str:
-    """An environment box as the user named it."""
-    if name.startswith("surface:"):
-        return f"the solid under surface '{name[len('surface:') :]}'"
-    return f"obstacle '{name}'"
 
 
 def _collision_cause(who: str, other: str, slack: float, margin: float, penalty: float) -> Cause:

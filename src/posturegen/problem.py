@@ -231,6 +231,16 @@ class _Layout:
     lbg: np.ndarray
     ubg: np.ndarray
 
+    @property
+    def n_x(self) -> int:
+        """Number of variables."""
+        return self.lbx.size
+
+    @property
+    def n_g(self) -> int:
+        """Number of constraint rows."""
+        return self.lbg.size
+
 
 @dataclass
 class CompiledNLP(_Layout):
@@ -264,16 +274,6 @@ class CompiledNLP(_Layout):
             self.solver, self.library = solver, True
         elif self.codegen_mode == "auto" and self.uses >= codegen.AUTO_BUILD_AFTER_USES:
             codegen.build_in_background(self.library_key, self.solver, self.nlp)
-
-    @property
-    def n_x(self) -> int:
-        """Number of variables."""
-        return self.lbx.size
-
-    @property
-    def n_g(self) -> int:
-        """Number of constraint rows."""
-        return self.lbg.size
 
 
 def _layout(blocks: dict[str, Any], size: Any) -> dict[str, slice]:
@@ -486,8 +486,10 @@ class Problem:
         return x0, p, lbg, ubg
 
     def summary(self) -> str:
-        """Human-readable sizes of the program: variable and constraint blocks, cost terms."""
-        c = self.compile()
+        """Human-readable sizes of the program: variable and constraint blocks, cost terms
+        (collision rows: those of ``collision_term``, see :func:`posturegen.inspection.describe`
+        for the rows a solve starts with)."""
+        c = self._program()
         lines = [
             f"robot {self.robot.name}: nq={self.robot.model.nq}, nv={self.robot.model.nv}",
             f"variables: {c.n_x}",
@@ -500,7 +502,7 @@ class Problem:
 
     def constraint_counts(self) -> dict[str, int]:
         """Rows per constraint block."""
-        c = self.compile()
+        c = self._program()
         return {n: s.stop - s.start for n, s in c.g_index.items()}
 
 

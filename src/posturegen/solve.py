@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .kinematics import scratch_data
+from .activeset import CollisionCheck
+from .collision import CollisionTerm, env_boxes, proxy_model, separated_start
 from .problem import _CACHE, Problem
 from .verify import SCHEMA, VerifyReport, verify_posture
 
@@ -269,36 +270,9 @@ def _solve_avoiding(
     Result and every run so far."""
     runs: list[_Run] = []
     opts = problem.collision_options
-    from .collision import (
-        CollisionTerm,
-        box_distances,
-        env_boxes,
-        proxy_model,
-        separated_start,
-    )
-
     robot = problem.robot
-    pm = proxy_model(robot)
-    boxes = env_boxes(problem)
-    # candidate self pairs: indices into pm.self_pairs (the user's exclusions removed)
-    cand_index, cand_self = _self_candidates(
-        pm, _excluded_pairs(problem) if opts.self_collision else None
-    )
-    allowed = np.zeros((len(pm.spheres), len(boxes)), dtype=bool)  # sphere may touch box
-    for k, box in enumerate(boxes):
-        allowed[:, k] = ~np.isin(pm.joint_ids, sorted(box.allowed_joints))
-    model, data = robot.model, scratch_data(robot.model)
-
-    def distances(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Candidate self and sphere-box distances at q; +inf where they cannot be below
-        margin + activation (the self pairs' broad phase) or the box may be touched."""
-        pin.forwardKinematics(model, data, q)
-        centers = pm.centers_world(model, data)
-        d_env = box_distances(pm, centers, boxes) if boxes else np.zeros((len(centers), 0))
-        d_self = np.zeros(0)
-        if len(cand_self):
-            d_self = pm.self_distances_within(centers, margin + opts.activation, cand_index)
-        return d_self, np.where(allowed, d_env, np.inf)
+    check = CollisionCheck.of(problem)
+    pm, boxes, cand_index, cand_self = check.pm, check.boxes, check.cand_index, check.cand_self
 
     joints0 = None  # the first start: q_init with its pressed self pairs parted
     if x0 is None and len(cand_self):
@@ -331,20 +305,10 @@ def _solve_avoiding(
     try:
         for _attempt in range(opts.tighten + 1):
             for _round in range(opts.max_rounds):
-                d_self, d_env = distances(q_check)
-                close = margin + opts.activation
-                new_self = {tuple(map(int, cand_self[k])) for k in np.flatnonzero(d_self < close)}
-                near = d_env < margin + opts.environment_activation
-                new_env = {(int(i), int(k)) for i, k in zip(*np.nonzero(near), strict=True)}
+                dist = check.distances(q_check, margin + opts.activation)
+                new_self, new_env = check.entering(dist, margin)
                 if runs:
-                    bad_self = {
-                        tuple(map(int, cand_self[k]))
-                        for k in np.flatnonzero(d_self < margin - 1e-6)
-                    }
-                    bad_env = {
-                        (int(i), int(k))
-                        for i, k in zip(*np.nonzero(d_env < margin - 1e-6), strict=True)
-                    }
+                    bad_self, bad_env = check.below(dist, margin - 1e-6, margin - 1e-6)
                     if bad_self <= active_self and bad_env <= active_env:
                         break  # no candidate outside the active set is violated
                 active_self |= new_self
@@ -383,44 +347,6 @@ def _solve_avoiding(
     finally:
         problem.solver_options = cold
     return result, [*prior, *runs]  # type: ignore[return-value]
-
-
-# candidate self pairs per proxy model and exclusions (the model is held: its id stays its own)
-_CANDIDATES: dict[
-    tuple[int, frozenset[tuple[int, int]] | None], tuple[Any, np.ndarray, np.ndarray]
-] = {}
-
-
-def _self_candidates(
-    pm: Any, excluded: set[tuple[int, int]] | None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Indices of pm.self_pairs whose joints are not an ``excluded`` pair (None: no self
-    pairs at all), and those pairs (k, 2), cached: masking Talos' 20,528 pairs took 0.3-0.5 ms
-    per solve."""
-    key = (id(pm), None if excluded is None else frozenset(excluded))
-    hit = _CANDIDATES.get(key)
-    if hit is not None and hit[0] is pm:
-        return hit[1], hit[2]
-    if excluded is None:
-        index = np.zeros(0, dtype=int)
-    elif not excluded:
-        index = np.arange(len(pm.self_pairs))
-    else:
-        jid = pm.joint_ids
-        a, b = jid[pm.self_pairs[:, 0]], jid[pm.self_pairs[:, 1]]
-        index = np.flatnonzero(
-            [(min(x, y), max(x, y)) not in excluded for x, y in zip(a, b, strict=True)]
-        )
-    if len(_CANDIDATES) > 64:
-        _CANDIDATES.clear()
-    _CANDIDATES[key] = (pm, index, pm.self_pairs[index])
-    return _CANDIDATES[key][1], _CANDIDATES[key][2]
-
-
-def _excluded_pairs(problem: Problem) -> set[tuple[int, int]]:
-    from .collision import excluded_joint_ids
-
-    return excluded_joint_ids(problem.robot, problem.collision_options)
 
 
 def _result(problem: Problem, runs: list[_Run], margin: float | None = None) -> Result:
@@ -537,8 +463,6 @@ def _collision_dict(problem: Problem, margin: float | None) -> dict[str, Any] | 
     opts = problem.collision_options
     if opts is None:
         return None
-    from .collision import env_boxes, proxy_model
-
     model = problem.robot.model
     excluded = {tuple(sorted(p)) for p in proxy_model(problem.robot).excluded_joint_pairs}
     excluded |= {tuple(sorted(p)) for p in opts.exclude}
