@@ -109,7 +109,6 @@ def _yaw_range(c: dict[str, Any], fld: str) -> tuple[float, float] | None:
     if c.get("yaw_range") is None:
         return None
     bounds = F.vector(c["yaw_range"], 2, f"{fld}.yaw_range")
-    check_angles(bounds, f"{fld}.yaw_range")
     lo, hi = (float(v) for v in bounds)
     if not lo < hi < lo + 2 * np.pi:
         raise InputError(
@@ -117,6 +116,7 @@ def _yaw_range(c: dict[str, Any], fld: str) -> tuple[float, float] | None:
             f"[{lo:g}, {hi:g}] is not an interval shorter than a turn",
             "write [min, max] in rad with min < max < min + 2π (omit it for any yaw)",
         )
+    check_angles(bounds, f"{fld}.yaw_range")
     return lo, hi
 
 
