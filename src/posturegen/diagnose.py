@@ -28,6 +28,7 @@ from .solve import (
     _IPOPT_OK,
     Result,
     _outputs,
+    _result,
     _run_ipopt,
     _solve_avoiding,
     configuration_from_x,
@@ -93,16 +94,38 @@ class Diagnosis:
 
 @dataclass
 class Relaxed:
-    """The solution x of an elastic program (its blocks ``x_index``), its outputs and q (nq,);
-    ``problem`` is the relaxed problem (its ``elastic`` weights, its last collision rows)."""
+    """The last IPOPT run of an elastic solve (its x, the blocks ``x_index``), its outputs
+    and q (nq,); ``problem`` is the relaxed problem (its ``elastic`` weights, its last
+    collision rows)."""
 
     problem: Any  # posturegen.problem.Problem
-    x: np.ndarray
-    x_index: dict[str, slice]
+    run: Any  # posturegen.solve._Run
     outputs: dict[str, np.ndarray]
     q: np.ndarray
-    status: str
-    converged: bool
+
+    @property
+    def x(self) -> np.ndarray:
+        """The solution's variables."""
+        return self.run.x
+
+    @property
+    def x_index(self) -> dict[str, slice]:
+        """The variable blocks of x."""
+        return self.run.compiled.x_index
+
+    @property
+    def status(self) -> str:
+        """IPOPT's status."""
+        return str(self.run.status)
+
+    @property
+    def converged(self) -> bool:
+        """IPOPT converged on the elastic program."""
+        return self.run.status in _IPOPT_OK
+
+    def verified(self) -> bool:
+        """The relaxed solution passes the re-check of the real problem's posture."""
+        return _result(self.problem, [self.run]).verification.ok
 
     @property
     def slacks(self) -> dict[str, np.ndarray]:
@@ -171,22 +194,14 @@ def _elastic_run(problem: Any, elastic: Elastic, opts: Any, start: Relaxed | Non
         run = _run_ipopt(relaxed, x0, layout=layout)
     else:
         run = _solve_avoiding(relaxed, x0, [], layout)[1][-1]
-    q = configuration_from_x(relaxed, run.compiled, run.x)
-    converged = run.status in _IPOPT_OK
-    return Relaxed(relaxed, run.x, run.compiled.x_index, _outputs(run), q, run.status, converged)
+    return Relaxed(relaxed, run, _outputs(run), configuration_from_x(relaxed, run.compiled, run.x))
 
 
 def from_relaxed(relaxed: Relaxed) -> Diagnosis:
     """The causes read from an elastic solution, strongest first, and the one-line summary."""
     found = causes(relaxed)
     if not found:
-        how = (
-            "the relaxed program found a posture that meets every constraint, which IPOPT "
-            "did not reach from the initial posture (try another options.initial)"
-            if relaxed.converged
-            else f"IPOPT did not converge on the relaxed program either ({relaxed.status})"
-        )
-        return Diagnosis(f"no constraint blocks it: {how}", (), relaxed.status, relaxed.converged)
+        return _unblocked(relaxed)
     main = [c for c in found if c.penalty >= MAIN_SHARE * found[0].penalty]
     line = "; ".join(c.text for c in main[:MAX_CAUSES])
     if len(main) > MAX_CAUSES:
@@ -194,6 +209,25 @@ def from_relaxed(relaxed: Relaxed) -> Diagnosis:
     if not relaxed.converged:
         line += f" (the relaxed solve stopped: {relaxed.status})"
     return Diagnosis(line, found, relaxed.status, False)
+
+
+def _unblocked(relaxed: Relaxed) -> Diagnosis:
+    """No row had to move (beyond the tolerances TOL_*); ``feasible`` when the relaxed
+    solution passes the re-check."""
+    feasible = relaxed.converged and relaxed.verified()
+    if not relaxed.converged:
+        how = f"IPOPT did not converge on the relaxed program either ({relaxed.status})"
+    elif feasible:
+        how = (
+            "the relaxed program found a posture that passes the re-check, which IPOPT did "
+            "not reach from the initial posture (try another options.initial)"
+        )
+    else:
+        how = (
+            "the relaxed program moved no row by more than 1 mm (0.5 % of a torque limit), "
+            "IPOPT did not reach a posture from the initial one (try another options.initial)"
+        )
+    return Diagnosis(f"no constraint blocks it: {how}", (), relaxed.status, feasible)
 
 
 def from_rejection(report: Any) -> Diagnosis:
