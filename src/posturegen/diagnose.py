@@ -187,7 +187,10 @@ def _elastic_run(problem: Any, elastic: Elastic, opts: Any, start: Relaxed | Non
         elastic=elastic,
         collision_term=None,
         collision_options=opts,
-        solver_options=replace(solver, max_iter=max(solver.max_iter, ELASTIC_MAX_ITER)),
+        # a one-off structure: CasADi's virtual machine, no compilation to C
+        solver_options=replace(
+            solver, max_iter=max(solver.max_iter, ELASTIC_MAX_ITER), codegen="off", jit=False
+        ),
     )
     x0, layout = (None, None) if start is None else (start.x, start.x_index)
     if opts is None:
