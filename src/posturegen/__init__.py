@@ -8,7 +8,15 @@ contacts (Brossette et al., IROS 2014).
 """
 
 from . import _threads  # noqa: F401  (first: before numpy loads OpenBLAS)
-from .errors import InputError, ModelError, PosturegenError, SolveError
+from .diagnose import diagnose
+from .errors import (
+    ImplausibleValueWarning,
+    InputError,
+    ModelError,
+    PosturegenError,
+    PosturegenWarning,
+    SolveError,
+)
 from .problem import Problem, SolverOptions
 from .robot import Robot, load_robot
 from .scene import Obstacle, Scene, Surface
@@ -17,10 +25,12 @@ from .spec import load_problem, problem_from_dict
 from .verify import VerifyReport, verify_posture
 
 __all__ = [
+    "ImplausibleValueWarning",
     "InputError",
     "ModelError",
     "Obstacle",
     "PosturegenError",
+    "PosturegenWarning",
     "Problem",
     "Result",
     "Robot",
@@ -29,6 +39,7 @@ __all__ = [
     "SolverOptions",
     "Surface",
     "VerifyReport",
+    "diagnose",
     "load_problem",
     "load_robot",
     "problem_from_dict",

@@ -10,10 +10,12 @@ import argparse
 import importlib.resources
 import json
 import sys
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-from .errors import PosturegenError
+from .errors import PosturegenError, PosturegenWarning
+from .hints import with_hint
 
 EXIT_OK, EXIT_NOT_FOUND, EXIT_INPUT = 0, 1, 2
 
@@ -28,18 +30,20 @@ def demo_names() -> list[str]:
 
 
 def _solve_to(problem_path: Path, out: Path, quiet: bool = False, png: str | None = None) -> int:
-    from .solve import solve
+    from .diagnose import solve_diagnosed
     from .spec import load_problem
 
-    problem = load_problem(problem_path)
-    result = solve(problem)
+    result = solve_diagnosed(load_problem(problem_path))
     path = result.write(out / "posture.json")
+    effort = (
+        f"IPOPT {result.status}, {result.iterations} iterations, "
+        f"{1e3 * result.solve_time_s:.1f} ms (+{1e3 * result.build_time_s:.0f} ms build)"
+    )
+    if not result.success:  # one line on stderr: what blocks it
+        print(f"posturegen: no posture: {result.diagnosis} ({effort})", file=sys.stderr)
+    elif not quiet:
+        print(f"verified posture: {effort}")
     if not quiet:
-        state = "verified posture" if result.success else "NO POSTURE"
-        print(
-            f"{state}: {result.message}; IPOPT {result.status}, {result.iterations} iterations, "
-            f"{1e3 * result.solve_time_s:.1f} ms (+{1e3 * result.build_time_s:.0f} ms build)"
-        )
         print(f"wrote {path}")
     if png is not None:
         from .viz import render_png
@@ -57,9 +61,10 @@ def cmd_solve(args: argparse.Namespace) -> int:
 
 def cmd_inspect(args: argparse.Namespace) -> int:
     """posturegen inspect PROBLEM.yaml: the program's variables, constraints and costs."""
+    from .inspection import describe
     from .spec import load_problem
 
-    print(load_problem(Path(args.problem)).summary())
+    print(describe(load_problem(Path(args.problem))))
     return EXIT_OK
 
 
@@ -89,7 +94,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         return EXIT_OK
     known = sorted(set(names) | set(SCENES))
     if args.name not in known:
-        raise PosturegenError(f"demo: unknown demo '{args.name}' (known: {', '.join(known)})")
+        hint = with_hint(args.name, known, f"known: {', '.join(known)}")
+        raise PosturegenError(f"demo: unknown demo '{args.name}' ({hint})")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.name in names and args.robot is None:
@@ -105,7 +111,8 @@ def cmd_climb(args: argparse.Namespace) -> int:
 
     climbs = [n for n, info in SCENES.items() if info.climb_steps is not None]
     if args.scene not in climbs:
-        raise PosturegenError(f"climb: unknown climb '{args.scene}' (known: {', '.join(climbs)})")
+        hint = with_hint(args.scene, climbs, f"known: {', '.join(climbs)}")
+        raise PosturegenError(f"climb: unknown climb '{args.scene}' ({hint})")
     steps = args.steps if args.steps is not None else SCENES[args.scene].climb_steps
     if steps is None or steps < 1:
         raise PosturegenError("--steps: expected an integer >= 1 (steps of each foot)")
@@ -165,12 +172,10 @@ def _run_sequence(seq: dict, out: Path, quiet: bool, png: str | None, final: boo
             print(f"{report.name} on {robot}: every stage verified")
         return EXIT_OK
     print(
-        f"posturegen: {report.name} on {robot}: no verified posture at stage "
-        f"'{last.name}' ({last.result.message}); nothing after it was solved",
+        f"posturegen: {report.name} on {robot}: no posture at stage '{last.name}': "
+        f"{last.diagnosis or last.result.message}; nothing after it was solved",
         file=sys.stderr,
     )
-    if last.diagnosis:
-        print(f"posturegen: diagnosis: {last.diagnosis}", file=sys.stderr)
     return EXIT_NOT_FOUND
 
 
@@ -220,9 +225,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
     names = args.family or list(FAMILIES)
     for name in names:
         if name not in FAMILIES:
-            raise PosturegenError(
-                f"--family: unknown family '{name}' (known: {', '.join(FAMILIES)})"
-            )
+            hint = with_hint(name, FAMILIES, f"known: {', '.join(FAMILIES)}")
+            raise PosturegenError(f"--family: unknown family '{name}' ({hint})")
 
     def show(rep: FamilyReport) -> None:
         print(rep.line(), flush=True)
@@ -304,12 +308,31 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _show_warning(
+    message: Warning | str,
+    category: type[Warning],
+    filename: str,
+    lineno: int,
+    file: object = None,
+    line: str | None = None,
+) -> None:
+    """posturegen's warnings as one line on stderr (``posturegen: warning: ...``), others as
+    Python shows them."""
+    if issubclass(category, PosturegenWarning):
+        print(f"posturegen: warning: {message}", file=sys.stderr)
+    else:
+        sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``posturegen`` console script."""
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args))
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", PosturegenWarning)
+            warnings.showwarning = _show_warning
+            return int(args.func(args))
     except PosturegenError as exc:
         print(f"posturegen: error: {exc}", file=sys.stderr)
         return EXIT_INPUT

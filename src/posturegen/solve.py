@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .kinematics import scratch_data
+from .activeset import CollisionCheck
+from .collision import CollisionTerm, env_boxes, proxy_model, separated_start
 from .problem import _CACHE, Problem
 from .verify import SCHEMA, VerifyReport, verify_posture
 
@@ -48,6 +49,8 @@ class Result:
     cost: float
     verification: VerifyReport
     posture: dict[str, Any]  # the posture-file content
+    # why no posture was found, one line (posturegen.diagnose.diagnose); "" when not diagnosed
+    diagnosis: str = ""
 
     @property
     def max_violation(self) -> float:
@@ -84,13 +87,20 @@ def _run_ipopt(
     lam_x0: np.ndarray | None = None,
     lam_g0: dict[str, np.ndarray] | None = None,
     joints0: np.ndarray | None = None,
+    layout: dict[str, slice] | None = None,
 ) -> _Run:
     """One IPOPT run; with ``lam_g0`` (multipliers per constraint block) a warm start; without
-    ``x0``, the problem's initial guess with ``joints0`` (nj,) for the joints when given."""
+    ``x0``, the problem's initial guess with ``joints0`` (nj,) for the joints when given.
+    ``layout``: the variable blocks of ``x0`` and ``lam_x0`` when they may differ from this
+    program's (an elastic program's collision slacks grow with the active set)."""
     built_before = problem.key() in _CACHE
     compiled = problem.compile()
     compiled.refresh()  # generated C once it is built (posturegen.codegen)
     x_init, p, lbg, ubg = problem.numeric(compiled)
+    if x0 is not None and layout is not None and layout != compiled.x_index:
+        x0 = _carried(x0, layout, compiled.x_index, x_init)
+        if lam_x0 is not None:
+            lam_x0 = _carried(lam_x0, layout, compiled.x_index, np.zeros_like(x_init))
     if x0 is not None and x0.shape == x_init.shape:
         x_init = x0
     elif joints0 is not None:
@@ -120,6 +130,19 @@ def _run_ipopt(
         lam_x=np.array(sol["lam_x"]).ravel(),
         lam_g=np.array(sol["lam_g"]).ravel(),
     )
+
+
+def _carried(
+    values: np.ndarray, old: dict[str, slice], new: dict[str, slice], default: np.ndarray
+) -> np.ndarray:
+    """``values`` laid out by the blocks ``old``, moved to the blocks ``new`` (the blocks of
+    another size, or new ones, from ``default``)."""
+    out = default.copy()
+    for name, sl in new.items():
+        src = old.get(name)
+        if src is not None and src.stop - src.start == sl.stop - sl.start:
+            out[sl] = values[src]
+    return out
 
 
 def _block_multipliers(run: _Run, term: Any) -> dict[str, np.ndarray]:
@@ -182,7 +205,8 @@ def solve(problem: Problem, x0: np.ndarray | None = None) -> Result:
     The pairs used are remembered per problem structure; the next problem of that structure
     starts with them. When IPOPT does not converge, two continuations follow: without the
     collision rows, then with the torque limits relaxed, each solution starting the real
-    program again. The Result counts every IPOPT run."""
+    program again. The Result counts every IPOPT run. Why a failure failed:
+    :func:`posturegen.diagnose.diagnose`."""
     x_start = None if x0 is None else np.asarray(x0, dtype=float)
     result, runs = _solve_continued(problem, x_start, [])
     effort = problem.robot.effort_limit
@@ -198,6 +222,12 @@ def solve(problem: Problem, x0: np.ndarray | None = None) -> Result:
         return result
     retry, _ = _solve_continued(problem, relaxed_runs[-1].x, relaxed_runs)
     return retry if retry.success else result
+
+
+def _outputs(run: _Run) -> dict[str, np.ndarray]:
+    """The program's outputs at a run's solution, flattened (column-major)."""
+    out = run.compiled.outputs(x=run.x, p=run.p)
+    return {k: np.array(v).ravel(order="F") for k, v in out.items()}
 
 
 def _solve_continued(
@@ -230,42 +260,19 @@ def _solve_continued(
 
 
 def _solve_avoiding(
-    problem: Problem, x0: np.ndarray | None, prior: list[_Run]
+    problem: Problem,
+    x0: np.ndarray | None,
+    prior: list[_Run],
+    layout: dict[str, slice] | None = None,
 ) -> tuple[Result, list[_Run]]:
-    """The active-set loop of :func:`solve` from ``x0``; ``prior`` runs count in the
-    Result's iterations and times. Returns the Result and every run so far."""
+    """The active-set loop of :func:`solve` from ``x0`` (laid out as ``layout``, default
+    this program's); ``prior`` runs count in the Result's iterations and times. Returns the
+    Result and every run so far."""
     runs: list[_Run] = []
     opts = problem.collision_options
-    from .collision import (
-        CollisionTerm,
-        box_distances,
-        env_boxes,
-        proxy_model,
-        separated_start,
-    )
-
     robot = problem.robot
-    pm = proxy_model(robot)
-    boxes = env_boxes(problem)
-    # candidate self pairs: indices into pm.self_pairs (the user's exclusions removed)
-    cand_index, cand_self = _self_candidates(
-        pm, _excluded_pairs(problem) if opts.self_collision else None
-    )
-    allowed = np.zeros((len(pm.spheres), len(boxes)), dtype=bool)  # sphere may touch box
-    for k, box in enumerate(boxes):
-        allowed[:, k] = ~np.isin(pm.joint_ids, sorted(box.allowed_joints))
-    model, data = robot.model, scratch_data(robot.model)
-
-    def distances(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Candidate self and sphere-box distances at q; +inf where they cannot be below
-        margin + activation (the self pairs' broad phase) or the box may be touched."""
-        pin.forwardKinematics(model, data, q)
-        centers = pm.centers_world(model, data)
-        d_env = box_distances(pm, centers, boxes) if boxes else np.zeros((len(centers), 0))
-        d_self = np.zeros(0)
-        if len(cand_self):
-            d_self = pm.self_distances_within(centers, margin + opts.activation, cand_index)
-        return d_self, np.where(allowed, d_env, np.inf)
+    check = CollisionCheck.of(problem)
+    pm, boxes, cand_index, cand_self = check.pm, check.boxes, check.cand_index, check.cand_self
 
     joints0 = None  # the first start: q_init with its pressed self pairs parted
     if x0 is None and len(cand_self):
@@ -298,20 +305,10 @@ def _solve_avoiding(
     try:
         for _attempt in range(opts.tighten + 1):
             for _round in range(opts.max_rounds):
-                d_self, d_env = distances(q_check)
-                close = margin + opts.activation
-                new_self = {tuple(map(int, cand_self[k])) for k in np.flatnonzero(d_self < close)}
-                near = d_env < margin + opts.environment_activation
-                new_env = {(int(i), int(k)) for i, k in zip(*np.nonzero(near), strict=True)}
+                dist = check.distances(q_check, margin + opts.activation)
+                new_self, new_env = check.entering(dist, margin)
                 if runs:
-                    bad_self = {
-                        tuple(map(int, cand_self[k]))
-                        for k in np.flatnonzero(d_self < margin - 1e-6)
-                    }
-                    bad_env = {
-                        (int(i), int(k))
-                        for i, k in zip(*np.nonzero(d_env < margin - 1e-6), strict=True)
-                    }
+                    bad_self, bad_env = check.below(dist, margin - 1e-6, margin - 1e-6)
                     if bad_self <= active_self and bad_env <= active_env:
                         break  # no candidate outside the active set is violated
                 active_self |= new_self
@@ -322,11 +319,16 @@ def _solve_avoiding(
                 problem.collision_term = term
                 if lam is None:
                     problem.solver_options = cold_run
-                    run = _run_ipopt(problem, x_warm, joints0=joints0)
+                    x_layout = runs[-1].compiled.x_index if runs else layout
+                    run = _run_ipopt(problem, x_warm, joints0=joints0, layout=x_layout)
                 else:
                     problem.solver_options = dataclasses.replace(cold_run, warm_start=True)
                     run = _run_ipopt(
-                        problem, x_warm, runs[-1].lam_x, _map_collision_multipliers(lam, term)
+                        problem,
+                        x_warm,
+                        runs[-1].lam_x,
+                        _map_collision_multipliers(lam, term),
+                        layout=runs[-1].compiled.x_index,
                     )
                 runs.append(run)
                 if run.status not in _IPOPT_OK:
@@ -347,49 +349,10 @@ def _solve_avoiding(
     return result, [*prior, *runs]  # type: ignore[return-value]
 
 
-# candidate self pairs per proxy model and exclusions (the model is held: its id stays its own)
-_CANDIDATES: dict[
-    tuple[int, frozenset[tuple[int, int]] | None], tuple[Any, np.ndarray, np.ndarray]
-] = {}
-
-
-def _self_candidates(
-    pm: Any, excluded: set[tuple[int, int]] | None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Indices of pm.self_pairs whose joints are not an ``excluded`` pair (None: no self
-    pairs at all), and those pairs (k, 2), cached: masking Talos' 20,528 pairs took 0.3-0.5 ms
-    per solve."""
-    key = (id(pm), None if excluded is None else frozenset(excluded))
-    hit = _CANDIDATES.get(key)
-    if hit is not None and hit[0] is pm:
-        return hit[1], hit[2]
-    if excluded is None:
-        index = np.zeros(0, dtype=int)
-    elif not excluded:
-        index = np.arange(len(pm.self_pairs))
-    else:
-        jid = pm.joint_ids
-        a, b = jid[pm.self_pairs[:, 0]], jid[pm.self_pairs[:, 1]]
-        index = np.flatnonzero(
-            [(min(x, y), max(x, y)) not in excluded for x, y in zip(a, b, strict=True)]
-        )
-    if len(_CANDIDATES) > 64:
-        _CANDIDATES.clear()
-    _CANDIDATES[key] = (pm, index, pm.self_pairs[index])
-    return _CANDIDATES[key][1], _CANDIDATES[key][2]
-
-
-def _excluded_pairs(problem: Problem) -> set[tuple[int, int]]:
-    from .collision import excluded_joint_ids
-
-    return excluded_joint_ids(problem.robot, problem.collision_options)
-
-
 def _result(problem: Problem, runs: list[_Run], margin: float | None = None) -> Result:
     """The Result of the last run (times and iterations summed over every run)."""
     run = runs[-1]
-    out = run.compiled.outputs(x=run.x, p=run.p)
-    outputs = {k: np.array(v).ravel(order="F") for k, v in out.items()}
+    outputs = _outputs(run)
     q = configuration_from_x(problem, run.compiled, run.x)
     torques = outputs["torques"]
     posture = posture_dict(problem, q, torques, outputs, margin)
@@ -418,6 +381,7 @@ def _result(problem: Problem, runs: list[_Run], margin: float | None = None) -> 
             "solve_time_s": solve_time,
             "ipopt_runs": len(runs),
             "max_violation": report.max_violation,
+            "diagnosis": None,
             "checks": {
                 c.name: {"value": c.value, "tolerance": c.tolerance, "ok": c.ok}
                 for c in report.checks
@@ -499,8 +463,6 @@ def _collision_dict(problem: Problem, margin: float | None) -> dict[str, Any] | 
     opts = problem.collision_options
     if opts is None:
         return None
-    from .collision import env_boxes, proxy_model
-
     model = problem.robot.model
     excluded = {tuple(sorted(p)) for p in proxy_model(problem.robot).excluded_joint_pairs}
     excluded |= {tuple(sorted(p)) for p in opts.exclude}

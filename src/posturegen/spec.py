@@ -27,6 +27,8 @@ from .contacts import (
 )
 from .costs import ForceCost, PostureCost, TorqueCost
 from .errors import InputError
+from .hints import with_hint
+from .plausible import check_angles, check_target
 from .problem import Problem, SolverOptions, Term
 from .robot import Robot, load_robot
 from .scene import Scene
@@ -79,7 +81,9 @@ def _friction(value: Any, field: str) -> FrictionModel:
     kind = F.string(v["model"], f"{field}.model")
     if kind not in ("pyramid", "cone"):
         raise InputError(
-            f"{field}.model", f"unknown friction model '{kind}'", "use pyramid or cone"
+            f"{field}.model",
+            f"unknown friction model '{kind}'",
+            with_hint(kind, ("pyramid", "cone"), "use pyramid or cone"),
         )
     faces = v.get("faces", 4)
     if isinstance(faces, bool) or not isinstance(faces, int) or faces < 3:
@@ -97,17 +101,22 @@ _CONTACT_KEYS = {
 }
 
 
+_ANY_CONTACT_KEY = sorted({k for keys in _CONTACT_KEYS.values() for k in keys})
+
+
 def _yaw_range(c: dict[str, Any], fld: str) -> tuple[float, float] | None:
     """A floating contact's optional yaw bounds [ψ_min, ψ_max] (rad), less than a turn apart."""
     if c.get("yaw_range") is None:
         return None
-    lo, hi = (float(v) for v in F.vector(c["yaw_range"], 2, f"{fld}.yaw_range"))
+    bounds = F.vector(c["yaw_range"], 2, f"{fld}.yaw_range")
+    lo, hi = (float(v) for v in bounds)
     if not lo < hi < lo + 2 * np.pi:
         raise InputError(
             f"{fld}.yaw_range",
             f"[{lo:g}, {hi:g}] is not an interval shorter than a turn",
             "write [min, max] in rad with min < max < min + 2π (omit it for any yaw)",
         )
+    check_angles(bounds, f"{fld}.yaw_range")
     return lo, hi
 
 
@@ -116,7 +125,9 @@ def _ellipse_options(c: Any, fld: str) -> EllipseOptions:
     form = F.string(c.get("formulation", base.formulation), f"{fld}.formulation")
     if form not in ("paper", "support"):
         raise InputError(
-            f"{fld}.formulation", f"unknown formulation '{form}'", "use paper or support"
+            f"{fld}.formulation",
+            f"unknown formulation '{form}'",
+            with_hint(form, ("paper", "support"), "use paper or support"),
         )
     radii = base.min_radii
     if "min_radii" in c:
@@ -147,13 +158,14 @@ def _contact(
 ) -> Contact:
     fld = f"contacts[{i}]"
     c = F.require_mapping(c, fld)
-    F.check_keys(c, fld, ["robot_patch", "surface", "type"], list(c))  # required first
+    # required first, and misspelt keys of any contact type
+    F.check_keys(c, fld, ["robot_patch", "surface", "type"], ["name", *_ANY_CONTACT_KEY])
     ctype = F.string(c["type"], f"{fld}.type")
     if ctype not in CONTACT_TYPES:
         raise InputError(
             f"{fld}.type",
             f"unknown contact type '{ctype}'",
-            f"use one of: {', '.join(CONTACT_TYPES)}",
+            with_hint(ctype, CONTACT_TYPES, f"use one of: {', '.join(CONTACT_TYPES)}"),
         )
     F.check_keys(c, fld, ["robot_patch", "surface", "type"], ["name", *_CONTACT_KEYS[ctype]])
     patch = robot.patch(F.string(c["robot_patch"], f"{fld}.robot_patch"), f"{fld}.robot_patch")
@@ -193,7 +205,7 @@ def _contact(
             "add position: [x, y] in the surface frame",
         )
     pos = F.vector(c["position"], 2, f"{fld}.position")
-    yaw = F.number(c.get("yaw", 0.0), f"{fld}.yaw")
+    yaw = F.angle(c.get("yaw", 0.0), f"{fld}.yaw")
     try:
         return FixedContact(name, patch, surface, pos, yaw, mu_c, fric)
     except InputError as exc:
@@ -205,13 +217,19 @@ def _task(t: Any, i: int, robot: Robot) -> PositionTask:
     t = F.require_mapping(t, fld)
     F.check_keys(t, fld, ["type", "frame", "target"], ["rpy", "weight"])
     if t["type"] != "position":
-        raise InputError(f"{fld}.type", f"unknown task type {t['type']!r}", "use position")
+        raise InputError(
+            f"{fld}.type",
+            f"unknown task type {t['type']!r}",
+            with_hint(str(t["type"]), ["position"], "use position"),
+        )
     frame = F.string(t["frame"], f"{fld}.frame")
     fid = robot.frame_id(frame, f"{fld}.frame")
     target = F.vector(t["target"], 3, f"{fld}.target")
     R = None
     if t.get("rpy") is not None:
-        R = pin.rpy.rpyToMatrix(*F.vector(t["rpy"], 3, f"{fld}.rpy"))
+        rpy = F.vector(t["rpy"], 3, f"{fld}.rpy")
+        check_angles(rpy, f"{fld}.rpy")
+        R = pin.rpy.rpyToMatrix(*rpy)
     weight = (
         F.number(t["weight"], f"{fld}.weight", positive=True)
         if t.get("weight") is not None
@@ -285,6 +303,8 @@ def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
     if not isinstance(tasks_raw, list):
         raise InputError("tasks", "expected a list", "write tasks: [{type: position, ...}]")
     tasks: list[Term] = [_task(t, i, robot) for i, t in enumerate(tasks_raw)]
+    for i, t in enumerate(tasks):
+        check_target(robot, t, contacts, f"tasks[{i}].target")  # a warning at most
     options = F.require_mapping(data.get("options", {}) or {}, "options")
     F.check_keys(
         options,
@@ -305,6 +325,26 @@ def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
     )
     q_init = robot.initial_configuration(options.get("initial"), "options.initial")
     self_collision = _flag(options.get("self_collision", False), "options.self_collision")
+    collision = _collision_options(options, robot, scene, self_collision)
+    solver = _solver_options(options.get("solver", {}) or {})
+    return Problem(
+        robot,
+        scene,
+        contacts,
+        tasks,
+        _costs(data.get("costs")),
+        np.asarray(q_init),
+        self_collision,
+        torque_scale,
+        solver,
+        collision,
+    )
+
+
+def _collision_options(
+    options: Any, robot: Robot, scene: Scene, self_collision: bool
+) -> CollisionOptions | None:
+    """What to avoid (None: nothing), from the problem's options."""
     env = options.get("environment_collision", "auto")
     if env != "auto":
         env = _flag(env, "options.environment_collision")
@@ -321,25 +361,13 @@ def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
             "expected a list of [link, link] pairs",
             "write [[link_a, link_b], ...]",
         )
-    collision = None
-    if self_collision or avoid_env:
-        collision = CollisionOptions(
-            self_collision, margin, tuple(tuple(p) for p in exclude), environment=avoid_env
-        )
-        excluded_joint_ids(robot, collision)  # names are checked here
-    solver = _solver_options(options.get("solver", {}) or {})
-    return Problem(
-        robot,
-        scene,
-        contacts,
-        tasks,
-        _costs(data.get("costs")),
-        np.asarray(q_init),
-        self_collision,
-        torque_scale,
-        solver,
-        collision,
+    if not (self_collision or avoid_env):
+        return None
+    collision = CollisionOptions(
+        self_collision, margin, tuple(tuple(p) for p in exclude), environment=avoid_env
     )
+    excluded_joint_ids(robot, collision)  # names are checked here
+    return collision
 
 
 def _flag(value: Any, field: str) -> bool:
