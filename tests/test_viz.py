@@ -16,6 +16,7 @@ from PIL import Image
 from posturegen import viz
 from posturegen.cli import main
 from posturegen.errors import InputError
+from posturegen.viz import scene, view3d
 
 CHROMIUM_FLAGS = [
     "--headless",
@@ -160,8 +161,8 @@ def test_camera_keeps_the_contacts_in_view(files):
     posture = viz.load_posture_any(files["brace"] / "posture.json")
     sv = viz.stance_view(posture)
     robot = sv.world_triangles()
-    content = viz._content(sv, robot, viz._force_scale([sv]))
-    cam = viz._choose_camera(sv, robot, viz._scene_mesh(sv)[0], content, viz.VIEW_ELEVATION)
+    content = scene.content_points(sv, robot, scene.force_scale([sv]))
+    cam = view3d.choose_camera(sv, robot, scene.scene_mesh(sv)[0], content, viz.VIEW_ELEVATION)
     wall = next(c for c in sv.contacts if c.surface == "wall")
     assert wall.T_ws[:3, 2] @ -cam.forward > 0
     frame = viz.Frame.fit(cam.screen(content), 800, 700)

@@ -1,0 +1,120 @@
+"""A contact's close-up in its surface's plane: both polygons, their intersection, the
+ellipse, the force points (normal force labelled in N, tangential part as an arrow)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .scene import clip_polygon
+from .style import ELLIPSE_COLOR, FORCE_COLOR, PATCH_COLOR, SURFACE_COLOR
+from .views import ContactView
+
+
+def _view_rect(c: ContactView) -> tuple[np.ndarray, np.ndarray]:
+    """The close-up's window (surface frame): the patch, the ellipse and the force points,
+    with a margin."""
+    pts = [c.patch2d]
+    E = c.ellipse_points()
+    if E is not None:
+        pts.append(c.to_surface(E))
+    if len(c.points3d):
+        pts.append(c.to_surface(c.points3d))
+    allp = np.vstack(pts)
+    lo, hi = allp.min(axis=0), allp.max(axis=0)
+    m = 0.2 * float((hi - lo).max()) + 0.01
+    return lo - m, hi + m
+
+
+def draw_closeup(ax: Any, c: ContactView, scale2d: float) -> None:
+    """One contact in its surface's plane: both polygons, their intersection, the ellipse and
+    the force points (normal force in N, tangential part as an arrow)."""
+    from matplotlib.patches import Polygon as MplPolygon
+    from shapely.geometry import Polygon
+
+    lo, hi = _view_rect(c)
+    box = ax.get_position()  # widen the window to the cell's shape: more of the surroundings
+    shape = box.width * ax.figure.bbox.width / (box.height * ax.figure.bbox.height)
+    centre, span = (lo + hi) / 2, hi - lo
+    span = np.maximum(span, [span[1] * shape, span[0] / shape])
+    lo, hi = centre - span / 2, centre + span / 2
+    surf = clip_polygon(c.surface2d, lo - 1.0, hi + 1.0)
+    if surf is not None:
+        ax.add_patch(MplPolygon(surf, closed=True, fc=SURFACE_COLOR, alpha=0.12, ec="none"))
+        ax.add_patch(MplPolygon(surf, closed=True, fill=False, ec=SURFACE_COLOR, lw=2))
+    ax.add_patch(MplPolygon(c.patch2d, closed=True, fc=PATCH_COLOR, alpha=0.15, ec="none"))
+    ax.add_patch(MplPolygon(c.patch2d, closed=True, fill=False, ec=PATCH_COLOR, lw=2))
+    inter = Polygon(c.patch2d).intersection(Polygon(c.surface2d))
+    info = []
+    if not inter.is_empty and inter.geom_type == "Polygon" and inter.area > 0:
+        I = np.asarray(inter.exterior.coords)[:-1]
+        ax.add_patch(
+            MplPolygon(I, closed=True, fill=False, ec="0.35", lw=0.8, ls="--", hatch="///")
+        )
+        info.append(f"P1∩P2 {1e4 * inter.area:.0f} cm²")
+    E = c.ellipse_points(180)
+    if E is not None:
+        e2 = c.to_surface(E)
+        ax.fill(e2[:, 0], e2[:, 1], color=ELLIPSE_COLOR, alpha=0.18, lw=0)
+        ax.plot(*np.vstack([e2, e2[:1]]).T, color=ELLIPSE_COLOR, lw=2)
+        centre = c.to_surface(c.ellipse3d[0][None])[0]
+        ax.plot(*centre, "+", color=ELLIPSE_COLOR, ms=8)
+        r1, r2 = (float(np.linalg.norm(a)) for a in c.ellipse3d[1:])
+        info.append(f"ellipse {100 * r1:.1f}×{100 * r2:.1f} cm")
+    if c.point3d is not None:
+        ax.plot(*c.to_surface(c.point3d[None])[0], "o", color=PATCH_COLOR, ms=6)
+    if len(c.points3d):
+        p2 = c.to_surface(c.points3d)
+        R = c.T_ws[:3, :3]
+        local = c.forces3d @ R  # surface frame components
+        fn = local[:, 2]
+        ax.scatter(
+            p2[:, 0],
+            p2[:, 1],
+            s=18 + 60 * fn / max(fn.max(), 1e-9),
+            color=FORCE_COLOR,
+            zorder=5,
+            edgecolors="white",
+            linewidths=0.5,
+        )
+        if scale2d > 0:
+            ax.quiver(
+                p2[:, 0],
+                p2[:, 1],
+                local[:, 0] * scale2d,
+                local[:, 1] * scale2d,
+                color=FORCE_COLOR,
+                angles="xy",
+                scale_units="xy",
+                scale=1,
+                width=0.006,
+                zorder=6,
+            )
+        centre = p2.mean(axis=0)
+        for p, f in zip(p2, fn, strict=True):
+            if f > max(0.05 * fn.max(), 0.5):  # [N]
+                u = p - centre  # the label outwards, away from the other points
+                u = u / n if (n := float(np.linalg.norm(u))) > 1e-9 else np.array([1.0, 1.0])
+                ax.annotate(
+                    f"{f:.0f} N",
+                    p,
+                    textcoords="offset points",
+                    xytext=tuple(9 * u),
+                    ha="left" if u[0] > 0.3 else ("right" if u[0] < -0.3 else "center"),
+                    va="bottom" if u[1] > 0.3 else ("top" if u[1] < -0.3 else "center"),
+                    fontsize=7.5,
+                    color="#900000",
+                    zorder=7,
+                )
+        info.append(f"Σfₙ {fn.sum():.0f} N")
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal", adjustable="box")
+    ax.tick_params(labelsize=7)
+    ax.grid(alpha=0.25)
+    ax.set_title(
+        f"{c.name} ({c.type}) on {c.surface}" + ("\n" + ", ".join(info) if info else ""), fontsize=9
+    )
+    ax.set_xlabel("x in the surface plane [m]", fontsize=7)
+    ax.set_ylabel("y [m]", fontsize=7)
