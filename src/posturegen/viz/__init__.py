@@ -12,12 +12,13 @@
 The modules, each importing only those before it: ``style`` (colours, constants) · ``files``
 (posture and sequence files) · ``meshes`` (the robot's decimated meshes) · ``views`` (what is
 drawn, in the world) · ``raster`` (camera, window, z-buffer) · ``scene`` (the scene's
-triangles) · ``view3d`` · ``closeup`` · ``figure`` ·
+triangles) · ``labels`` (text that does not overlap) · ``obstacles`` (boxes at their
+depth) · ``triad`` (world axes, scale bar) · ``view3d`` · ``closeup`` · ``figure`` ·
 ``html``.
 """
 
 from ..verify import SEQUENCE_SCHEMA
-from .figure import render_png
+from .figure import Drawing, draw_figure, render_png
 from .files import is_sequence, load_posture_any, load_sequence, read_json, write_sequence
 from .html import viewer_html, write_html
 from .meshes import MeshPart, RobotMeshes, decimate, mesh_cache_dir, robot_meshes, shape_mesh
@@ -34,11 +35,13 @@ __all__ = [
     "VIEW_ELEVATION",
     "Camera",
     "ContactView",
+    "Drawing",
     "Frame",
     "MeshPart",
     "RobotMeshes",
     "StanceView",
     "decimate",
+    "draw_figure",
     "is_sequence",
     "load_posture_any",
     "load_sequence",

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from .labels import Box, place_labels
 from .scene import clip_polygon
 from .style import ELLIPSE_COLOR, FORCE_COLOR, PATCH_COLOR, SURFACE_COLOR
 from .views import ContactView
@@ -72,7 +73,7 @@ def draw_closeup(ax: Any, c: ContactView, scale2d: float) -> None:
         ax.scatter(
             p2[:, 0],
             p2[:, 1],
-            s=18 + 60 * fn / max(fn.max(), 1e-9),
+            s=marker_area(fn),
             color=FORCE_COLOR,
             zorder=5,
             edgecolors="white",
@@ -91,22 +92,6 @@ def draw_closeup(ax: Any, c: ContactView, scale2d: float) -> None:
                 width=0.006,
                 zorder=6,
             )
-        centre = p2.mean(axis=0)
-        for p, f in zip(p2, fn, strict=True):
-            if f > max(0.05 * fn.max(), 0.5):  # [N]
-                u = p - centre  # the label outwards, away from the other points
-                u = u / n if (n := float(np.linalg.norm(u))) > 1e-9 else np.array([1.0, 1.0])
-                ax.annotate(
-                    f"{f:.0f} N",
-                    p,
-                    textcoords="offset points",
-                    xytext=tuple(9 * u),
-                    ha="left" if u[0] > 0.3 else ("right" if u[0] < -0.3 else "center"),
-                    va="bottom" if u[1] > 0.3 else ("top" if u[1] < -0.3 else "center"),
-                    fontsize=7.5,
-                    color="#900000",
-                    zorder=7,
-                )
         info.append(f"Σfₙ {fn.sum():.0f} N")
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
@@ -118,3 +103,33 @@ def draw_closeup(ax: Any, c: ContactView, scale2d: float) -> None:
     )
     ax.set_xlabel("x in the surface plane [m]", fontsize=7)
     ax.set_ylabel("y [m]", fontsize=7)
+    if len(c.points3d):
+        _force_labels(ax, c.to_surface(c.points3d), (c.forces3d @ c.T_ws[:3, :3])[:, 2])
+
+
+def marker_area(fn: np.ndarray) -> np.ndarray:
+    """The force points' marker areas [pt²]: by their normal force ``fn`` (k,) [N]."""
+    return 18 + 60 * fn / max(float(fn.max()), 1e-9)
+
+
+def _force_labels(ax: Any, p2: np.ndarray, fn: np.ndarray) -> list[Any]:
+    """The normal forces' labels (N) beside their points (k, 2), outwards from the points'
+    centre, the largest first, no two overlapping nor over a point (:mod:`.labels`); forces
+    below 5 % of the largest (or 0.5 N) unlabelled. Returns the labels drawn."""
+    r_px = np.sqrt(marker_area(fn)) / 2 * ax.figure.dpi / 72  # markers' radii
+    ax.apply_aspect()
+    markers = [Box.around(xy, r) for xy, r in zip(ax.transData.transform(p2), r_px, strict=True)]
+    shown = [i for i in np.argsort(-fn) if fn[i] > max(0.05 * fn.max(), 0.5)]  # [N]
+    labels = place_labels(
+        ax,
+        p2[shown],
+        [f"{fn[i]:.0f} N" for i in shown],
+        p2[shown] - p2.mean(axis=0),
+        avoid=markers,
+        fontsize=7.5,
+        color="#900000",
+        zorder=7,
+        gid="force-label",
+        bbox={"boxstyle": "square,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.7},
+    )
+    return [a for a in labels if a is not None]

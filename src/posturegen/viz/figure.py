@@ -4,6 +4,7 @@ right, the legend and the title. Matplotlib's Agg canvas only: no display needed
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -22,8 +23,9 @@ from .style import (
     SURFACE_COLOR,
     VIEW_ELEVATION,
 )
+from .triad import Triad
 from .view3d import View3D, draw_3d
-from .views import stance_view
+from .views import StanceView, stance_view
 
 
 def _title(posture: dict[str, Any], file: str | None) -> str:
@@ -41,26 +43,28 @@ def _title(posture: dict[str, Any], file: str | None) -> str:
     return f"{robot} — {what} — {state}"
 
 
-def render_png(
+@dataclass(frozen=True)
+class Drawing:
+    """A drawn figure: matplotlib's Figure (Agg canvas), its 3-D view and what the view's
+    world axes and scale bar are."""
+
+    figure: Any
+    view: View3D
+    triad: Triad
+
+
+def draw_figure(
     posture: str | Path | dict[str, Any],
-    out_path: str | Path,
     *,
     meshes: str = "visual",
     dpi: float = 100.0,
     title: str | None = None,
     azimuth: float | None = None,
     elevation: float = VIEW_ELEVATION,
-) -> Path:
-    """Draw a posture (file path or dict) to a PNG: the 3-D view on the left, a close-up of
-    each contact in its own plane on the right. 1600 x 900 pixels at ``dpi`` 100.
-
-    The camera looks from ``azimuth`` degrees off the robot's heading (default: the first of
-    :data:`VIEW_AZIMUTHS` that hides little of the robot behind the scene), ``elevation``
-    degrees above the horizon."""
+) -> Drawing:
+    """The figure of a posture (file path or dict), not saved (see :func:`render_png`)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch
 
     data = load_posture_any(posture)
     sv = stance_view(data, meshes, PNG_CELL)
@@ -87,26 +91,28 @@ def render_png(
     ax3 = fig.add_subplot(gs[:, 0])
     box = ax3.get_position()
     width, height = (round(box.width * fig.bbox.width), round(box.height * fig.bbox.height))
-    draw_3d(ax3, view, width, height)
+    triad = draw_3d(ax3, view, width, height)
     for k, c in enumerate(sv.contacts):
         ax = fig.add_subplot(gs[k // ncols, 1 + k % ncols])
         draw_closeup(ax, c, 0.5 * scale)
     if title is None:
         title = _title(data, Path(posture).name if isinstance(posture, str | Path) else None)
     fig.suptitle(title, fontsize=13)
+    _legend(fig, sv, scale)
+    return Drawing(fig, view, triad)
+
+
+def _legend(fig: Any, sv: StanceView, scale: float) -> None:
+    """The colours' legend under the figure, and the meshes' note in its corner."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    force = f"contact force ({0.1 / scale:.0f} N per 10 cm)" if scale > 0 else "contact force"
     handles = [
         Patch(fc=PATCH_COLOR, alpha=0.5, ec=PATCH_COLOR, label="robot patch (P1)"),
         Patch(fc=SURFACE_COLOR, alpha=0.3, ec=SURFACE_COLOR, label="surface (P2)"),
         Patch(fc=ELLIPSE_COLOR, alpha=0.4, ec=ELLIPSE_COLOR, label="contact ellipse"),
-        Line2D(
-            [],
-            [],
-            color=FORCE_COLOR,
-            lw=2,
-            label=f"contact force ({0.1 / scale:.0f} N per 10 cm)"
-            if scale > 0
-            else "contact force",
-        ),
+        Line2D([], [], color=FORCE_COLOR, lw=2, label=force),
     ]
     if sv.obstacles:
         handles.append(
@@ -125,7 +131,29 @@ def render_png(
         fontsize=7,
         color="0.4",
     )
+
+
+def render_png(
+    posture: str | Path | dict[str, Any],
+    out_path: str | Path,
+    *,
+    meshes: str = "visual",
+    dpi: float = 100.0,
+    title: str | None = None,
+    azimuth: float | None = None,
+    elevation: float = VIEW_ELEVATION,
+) -> Path:
+    """Draw a posture (file path or dict) to a PNG: the 3-D view on the left, with the world
+    axes and a scale bar in a corner, a close-up of each contact in its own plane on the right.
+    1600 x 900 pixels at ``dpi`` 100.
+
+    The camera looks from ``azimuth`` degrees off the robot's heading (default: the first of
+    :data:`VIEW_AZIMUTHS` that hides little of the robot behind the scene), ``elevation``
+    degrees above the horizon."""
+    drawing = draw_figure(
+        posture, meshes=meshes, dpi=dpi, title=title, azimuth=azimuth, elevation=elevation
+    )
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=dpi, format="png")
+    drawing.figure.savefig(out, dpi=dpi, format="png")
     return out

@@ -150,3 +150,18 @@ def rasterize(
     seen = z <= zbuf[pix]
     ids[pix[seen]] = keep[t[seen]]
     return zbuf.reshape(height, width), ids.reshape(height, width)
+
+
+def shade(
+    tris: np.ndarray, base: np.ndarray, cam: Camera, flat: float | np.ndarray = 0.0
+) -> np.ndarray:
+    """Flat-shaded colours (k, 3) of world triangles: a key light above-left of the camera,
+    a head light, ambient; two-sided. ``flat`` in [0, 1] fades the lights towards the base
+    colour (the scene's planes: light, so that the robot stands out)."""
+    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-15)
+    n *= np.where(n @ cam.forward > 0, -1.0, 1.0)[:, None]  # towards the camera
+    key = -cam.forward + 0.9 * cam.up - 0.6 * cam.right
+    key /= np.linalg.norm(key)
+    light = 0.30 + 0.55 * np.clip(n @ key, 0, 1) + 0.22 * np.clip(-(n @ cam.forward), 0, 1)
+    return np.clip(base * ((1 - np.asarray(flat)) * light + flat)[:, None], 0, 1)

@@ -8,39 +8,24 @@ from typing import Any
 
 import numpy as np
 
-from .meshes import BOX_EDGES, box_mesh
-from .raster import Camera, Frame, base_yaw, rasterize
+from .labels import place_labels
+from .obstacles import draw_obstacles
+from .raster import Camera, Frame, base_yaw, rasterize, shade
 from .scene import content_points, scene_mesh, surface_edges
 from .style import (
     ELLIPSE_COLOR,
     FORCE_COLOR,
-    OBSTACLE_EDGE_COLOR,
-    OBSTACLE_RGB,
     PATCH_COLOR,
     ROBOT_RGB,
     SURFACE_COLOR,
     VIEW_AZIMUTHS,
     VIEW_ELEVATION,
 )
-from .views import StanceView, lift, transform
+from .triad import Triad, busy_mask, draw_triad
+from .views import ContactView, StanceView, lift, transform
 
 SUPERSAMPLE = 2  # pixels per figure pixel on each side (antialiasing)
 OUTLINE_DEPTH = 0.025  # [m]: a depth step drawn as an outline
-
-
-def _shade(
-    tris: np.ndarray, base: np.ndarray, cam: Camera, flat: float | np.ndarray = 0.0
-) -> np.ndarray:
-    """Flat-shaded colours (k, 3) of world triangles: a key light above-left of the camera,
-    a head light, ambient; two-sided. ``flat`` in [0, 1] fades the lights towards the base
-    colour (the scene's planes: light, so that the robot stands out)."""
-    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-15)
-    n *= np.where(n @ cam.forward > 0, -1.0, 1.0)[:, None]  # towards the camera
-    key = -cam.forward + 0.9 * cam.up - 0.6 * cam.right
-    key /= np.linalg.norm(key)
-    light = 0.30 + 0.55 * np.clip(n @ key, 0, 1) + 0.22 * np.clip(-(n @ cam.forward), 0, 1)
-    return np.clip(base * ((1 - np.asarray(flat)) * light + flat)[:, None], 0, 1)
 
 
 def _around_contacts(sv: StanceView, reach: float = 0.1, n: int = 7) -> np.ndarray:
@@ -109,7 +94,7 @@ def _image(
     tris = np.concatenate([robot, surfaces])
     base = np.vstack([np.tile(ROBOT_RGB, (len(robot), 1)), surface_rgb])
     flat = np.r_[np.zeros(len(robot)), np.full(len(surfaces), 0.6)]
-    colours = np.vstack([_shade(tris, base, cam, flat), np.ones((1, 3))])  # last: background
+    colours = np.vstack([shade(tris, base, cam, flat), np.ones((1, 3))])  # last: background
     zbuf, ids = rasterize(big.pixels(cam.screen(tris)), cam.depth(tris), big.width, big.height)
     img = colours[ids]  # -1: the background
     # outlines: depth steps, and the robot's edge against the scene, on the nearer side
@@ -123,11 +108,7 @@ def _image(
         e[1:] |= step & near
         e[:-1] |= step & ~near
     img[edge & (ids >= 0)] *= 0.45
-    if len(boxes):  # obstacles: translucent, over what they hide
-        bz, bids = rasterize(big.pixels(cam.screen(boxes)), cam.depth(boxes), big.width, big.height)
-        front = (bids >= 0) & (bz < zbuf)
-        shade = _shade(boxes, np.tile(OBSTACLE_RGB, (len(boxes), 1)), cam)
-        img[front] = 0.35 * img[front] + 0.65 * shade[bids[front]]
+    draw_obstacles(img, cam, big, boxes, zbuf)  # at their depth
     k = SUPERSAMPLE
     return img.reshape(frame.height, k, frame.width, k, 3).mean(axis=(1, 3)), zbuf, big
 
@@ -200,84 +181,87 @@ class View3D:
         return float(span[0] / max(span[1], 1e-9))
 
 
-def draw_3d(ax: Any, view: View3D, width: int, height: int) -> None:
+def draw_3d(ax: Any, view: View3D, width: int, height: int) -> Triad:
     """The robot, the scene and the contacts, orthographic, on a 2-D axes of ``width`` x
-    ``height`` pixels: a z-buffered image of the meshes, the contacts drawn on top."""
-    from matplotlib.patches import FancyArrowPatch, Polygon
-
-    sv, scale, cam, box = view.sv, view.scale, view.cam, view.box
+    ``height`` pixels: a z-buffered image of the meshes, the contacts drawn on top, the world
+    axes and a scale bar in a corner (returned), the contacts' names where no two overlap."""
+    sv, cam = view.sv, view.cam
     frame = Frame.fit(cam.screen(view.content), width, height, margin=0.03)
     img, zbuf, big = _image(cam, frame, view.robot, view.scene)
     ax.imshow(img, extent=frame.extent, interpolation="none", zorder=1)
-
     drawn = set()
     for c in sv.contacts:  # the contacts' surfaces' edges, hidden parts dotted
         if c.surface not in drawn:
             drawn.add(c.surface)
-            for seg in surface_edges(c.T_ws, c.surface2d, *box):
+            for seg in surface_edges(c.T_ws, c.surface2d, *view.box):
                 _draw_edges(ax, cam, big, zbuf, seg, SURFACE_COLOR)
-    for _, size, T in sv.obstacles:  # the obstacles' edges
-        corners = transform(T, box_mesh(size / 2)[0])
-        for i, j in BOX_EDGES:
-            _draw_edges(ax, cam, big, zbuf, corners[[i, j]], OBSTACLE_EDGE_COLOR)
     for c in sv.contacts:  # on top of everything
-        ax.add_patch(
-            Polygon(
-                cam.screen(c.patch3d), closed=True, fc=PATCH_COLOR, alpha=0.35, ec="none", zorder=5
-            )
-        )
-        ax.add_patch(
-            Polygon(
-                cam.screen(c.patch3d), closed=True, fill=False, ec=PATCH_COLOR, lw=1.6, zorder=5
-            )
-        )
-        E = c.ellipse_points()
-        if E is not None:
-            ax.add_patch(
-                Polygon(
-                    cam.screen(E),
-                    closed=True,
-                    fc=ELLIPSE_COLOR,
-                    alpha=0.4,
-                    ec=ELLIPSE_COLOR,
-                    lw=1.6,
-                    zorder=6,
-                )
-            )
-        if c.point3d is not None:
-            ax.plot(*cam.screen(c.point3d), "o", color=PATCH_COLOR, ms=5, zorder=7)
-        if len(c.forces3d) and scale > 0:
-            a = cam.screen(c.points3d)
-            b = cam.screen(c.points3d + scale * c.forces3d)
-            for p, q in zip(a, b, strict=True):
-                ax.add_patch(
-                    FancyArrowPatch(
-                        p,
-                        q,
-                        arrowstyle="-|>",
-                        mutation_scale=9,
-                        color=FORCE_COLOR,
-                        lw=1.4,
-                        shrinkA=0,
-                        shrinkB=0,
-                        zorder=8,
-                    )
-                )
-            ax.plot(*a.T, "o", color=FORCE_COLOR, ms=2.5, zorder=8)
-        centre = cam.screen(c.patch3d.mean(axis=0))
-        ax.annotate(
-            c.name,
-            centre,
-            xytext=(10, -12),
-            textcoords="offset points",
-            fontsize=8,
-            color="#1b5e20",
-            zorder=9,
-            bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.7},
-        )
+        _draw_contact(ax, cam, c, view.scale)
     for _, t in sv.targets:
         ax.plot(*cam.screen(t), "x", color="black", ms=8, mew=2, zorder=9)
     ax.set_xlim(frame.extent[0], frame.extent[1])
     ax.set_ylim(frame.extent[2], frame.extent[3])
     ax.set_aspect("equal")
     ax.set_axis_off()
+    triad = draw_triad(ax, cam, frame, busy_mask(img, frame, cam.screen(_overlays(view))))
+    place_labels(
+        ax,
+        np.array([cam.screen(c.patch3d.mean(axis=0)) for c in sv.contacts]).reshape(-1, 2),
+        [c.name for c in sv.contacts],
+        np.tile([1.0, -1.0], (len(sv.contacts), 1)),  # below right of the patch
+        avoid=[triad.card],
+        fontsize=8,
+        color="#1b5e20",
+        zorder=9,
+        gid="contact-label",
+        bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.7},
+    )
+    return triad
+
+
+def _overlays(view: View3D) -> np.ndarray:
+    """World points (k, 3) of what is drawn over the image: the contacts' patches, ellipses
+    and force arrows (sampled along them), the targets."""
+    pts = [np.zeros((0, 3))]
+    for c in view.sv.contacts:
+        pts.append(c.patch3d)
+        if (E := c.ellipse_points(24)) is not None:
+            pts.append(E)
+        for t in np.linspace(0.0, 1.0, 12):
+            pts.append(c.points3d + t * view.scale * c.forces3d)
+    pts += [t[None] for _, t in view.sv.targets]
+    return np.vstack(pts)
+
+
+def _draw_contact(ax: Any, cam: Camera, c: ContactView, scale: float) -> None:
+    """A contact's patch (green), ellipse (blue), point, and force arrows (red, ``scale``
+    [m/N]), drawn over the image."""
+    from matplotlib.patches import FancyArrowPatch, Polygon
+
+    patch = cam.screen(c.patch3d)
+    ax.add_patch(Polygon(patch, closed=True, fc=PATCH_COLOR, alpha=0.35, ec="none", zorder=5))
+    ax.add_patch(Polygon(patch, closed=True, fill=False, ec=PATCH_COLOR, lw=1.6, zorder=5))
+    E = c.ellipse_points()
+    if E is not None:
+        style = {"fc": ELLIPSE_COLOR, "alpha": 0.4, "ec": ELLIPSE_COLOR, "lw": 1.6, "zorder": 6}
+        ax.add_patch(Polygon(cam.screen(E), closed=True, **style))
+    if c.point3d is not None:
+        ax.plot(*cam.screen(c.point3d), "o", color=PATCH_COLOR, ms=5, zorder=7)
+    if len(c.forces3d) and scale > 0:
+        a = cam.screen(c.points3d)
+        b = cam.screen(c.points3d + scale * c.forces3d)
+        for p, q in zip(a, b, strict=True):
+            ax.add_patch(
+                FancyArrowPatch(
+                    p,
+                    q,
+                    arrowstyle="-|>",
+                    mutation_scale=9,
+                    color=FORCE_COLOR,
+                    lw=1.4,
+                    shrinkA=0,
+                    shrinkB=0,
+                    zorder=8,
+                )
+            )
+        ax.plot(*a.T, "o", color=FORCE_COLOR, ms=2.5, zorder=8)
