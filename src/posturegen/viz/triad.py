@@ -97,7 +97,10 @@ def draw_triad(ax: Any, cam: Camera, frame: Frame, busy: np.ndarray) -> Triad:
     )
     reach = (1.35 * ARROW + 8) * k  # [px] of the triad around its origin, letters included
     origin = data(left + 8 * k + reach, top + 0.6 * h)
-    tips = {name: _axis(ax, cam, origin, name, ARROW * k * res) for name in AXES}
+    unit = ARROW * k * res
+    tips = {name: origin + unit * cam.screen(np.array(v)) for name, v in AXES.items()}
+    for name in AXES:
+        _axis(ax, origin, name, tips, unit)
     start = left + 16 * k + 2 * reach  # the scale bar beside the triad
     bar, length = _scale_bar(
         ax, data(start, top + 0.7 * h), (left + w - 10 * k - start) * res, k * res
@@ -125,13 +128,39 @@ def _bbox(lo: np.ndarray, hi: np.ndarray) -> Any:
     return Bbox([lo, hi])
 
 
-def _axis(ax: Any, cam: Camera, origin: np.ndarray, name: str, unit: float) -> np.ndarray:
-    """One world axis from ``origin``: an arrow of ``unit`` (data length of a unit vector in
-    the image plane) times its projection, its letter beyond the tip; returns the tip."""
-    d = cam.screen(np.array(AXES[name]))
+def _distance_to_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    ab = b - a
+    t = float(np.clip(np.dot(p - a, ab) / max(float(np.dot(ab, ab)), 1e-300), 0.0, 1.0))
+    return float(np.linalg.norm(p - a - t * ab))
+
+
+def _letter_at(
+    origin: np.ndarray, name: str, tips: dict[str, np.ndarray], unit: float
+) -> np.ndarray:
+    """Where an axis' letter goes: beyond its tip when that is 0.3 ``unit`` from the other
+    arrows, else the one of eight spots around the tip farthest from them."""
+    d = tips[name] - origin
     n = float(np.linalg.norm(d))
-    tip = origin + unit * d
-    if n > 0.2:
+    turns = np.radians(np.arange(0, 360, 45))
+    spots = [tips[name] + 0.35 * unit * np.array([np.cos(t), np.sin(t)]) for t in turns]
+    if n > 0.2 * unit:
+        spots.insert(0, tips[name] + 0.35 * unit * d / n)
+    others = [tips[o] for o in tips if o != name and np.linalg.norm(tips[o] - origin) > 0]
+
+    def room(p: np.ndarray) -> float:
+        return min((_distance_to_segment(p, origin, t) for t in others), default=np.inf)
+
+    if n > 0.2 * unit and room(spots[0]) >= 0.3 * unit:
+        return spots[0]
+    return max(spots, key=room)
+
+
+def _axis(ax: Any, origin: np.ndarray, name: str, tips: dict[str, np.ndarray], unit: float) -> None:
+    """One world axis from ``origin`` to its tip (``unit``: the data length of a unit vector
+    in the image plane), an arrow, or a dot when it is nearly along the line of sight; its
+    letter where it meets no other arrow (:func:`_letter_at`)."""
+    tip = tips[name]
+    if np.linalg.norm(tip - origin) > 0.2 * unit:
         ax.annotate(
             "",
             xy=tuple(tip),
@@ -147,10 +176,9 @@ def _axis(ax: Any, cam: Camera, origin: np.ndarray, name: str, unit: float) -> n
                 "shrinkB": 0,
             },
         ).set_gid(f"world-axis-{name}")
-        at = tip + 0.35 * unit * d / n
-    else:  # along the line of sight: a dot, its letter beside it
+    else:  # along the line of sight: a dot
         ax.plot(*tip, "o", color=INK, ms=3, zorder=11, gid=f"world-axis-{name}")
-        at = tip + 0.3 * unit * np.array([1.0, -0.3])
+    at = _letter_at(origin, name, tips, unit)
     ax.text(
         *at,
         name,
@@ -162,7 +190,6 @@ def _axis(ax: Any, cam: Camera, origin: np.ndarray, name: str, unit: float) -> n
         zorder=11,
         gid=f"world-axis-label-{name}",
     )
-    return tip
 
 
 def _scale_bar(
