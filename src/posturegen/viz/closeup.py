@@ -66,33 +66,7 @@ def draw_closeup(ax: Any, c: ContactView, scale2d: float) -> None:
     if c.point3d is not None:
         ax.plot(*c.to_surface(c.point3d[None])[0], "o", color=PATCH_COLOR, ms=6)
     if len(c.points3d):
-        p2 = c.to_surface(c.points3d)
-        R = c.T_ws[:3, :3]
-        local = c.forces3d @ R  # surface frame components
-        fn = local[:, 2]
-        ax.scatter(
-            p2[:, 0],
-            p2[:, 1],
-            s=marker_area(fn),
-            color=FORCE_COLOR,
-            zorder=5,
-            edgecolors="white",
-            linewidths=0.5,
-        )
-        if scale2d > 0:
-            ax.quiver(
-                p2[:, 0],
-                p2[:, 1],
-                local[:, 0] * scale2d,
-                local[:, 1] * scale2d,
-                color=FORCE_COLOR,
-                angles="xy",
-                scale_units="xy",
-                scale=1,
-                width=0.006,
-                zorder=6,
-            )
-        info.append(f"Σfₙ {fn.sum():.0f} N")
+        info.append(_draw_forces(ax, c, scale2d))
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
     ax.set_aspect("equal", adjustable="box")
@@ -105,6 +79,21 @@ def draw_closeup(ax: Any, c: ContactView, scale2d: float) -> None:
     ax.set_ylabel("y [m]", fontsize=7)
     if len(c.points3d):
         _force_labels(ax, c.to_surface(c.points3d), (c.forces3d @ c.T_ws[:3, :3])[:, 2])
+
+
+def _draw_forces(ax: Any, c: ContactView, scale2d: float) -> str:
+    """The force points (sized by their normal force) and their tangential parts (arrows of
+    ``scale2d`` [m/N]); returns the normal forces' sum as text."""
+    p2 = c.to_surface(c.points3d)
+    local = c.forces3d @ c.T_ws[:3, :3]  # surface frame components
+    fn = local[:, 2]
+    style = {"color": FORCE_COLOR, "zorder": 5}
+    ax.scatter(*p2.T, s=marker_area(fn), edgecolors="white", linewidths=0.5, **style)
+    if scale2d > 0:
+        u, v = local[:, 0] * scale2d, local[:, 1] * scale2d
+        kw = {"angles": "xy", "scale_units": "xy", "scale": 1, "width": 0.006}
+        ax.quiver(*p2.T, u, v, color=FORCE_COLOR, zorder=6, **kw)
+    return f"Σfₙ {fn.sum():.0f} N"
 
 
 def marker_area(fn: np.ndarray) -> np.ndarray:

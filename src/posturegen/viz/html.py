@@ -128,7 +128,6 @@ def viewer_html(views: Sequence[StanceView], files: Sequence[str], title: str) -
             "force": FORCE_COLOR,
             "obstacle": _hex(OBSTACLE_RGB),
         },
-        # the viewer frames a sphere of ``radius`` in its field of view's narrower angle
         "view": {"target": _rounded(centre), "eye": _rounded(eye), "radius": 0.9 * radius},
         "forceScale": scale,
         "forceLabel": f"10 cm = {0.1 / scale:.0f} N" if scale > 0 else "no force",
