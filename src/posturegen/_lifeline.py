@@ -38,20 +38,24 @@ for pgid in groups:
 _LOCK = threading.Lock()
 _CHILDREN: set[subprocess.Popen] = set()
 _watchdog: subprocess.Popen | None = None
+_no_watchdog = False  # it could not be started: the children are still killed at exit
 
 
 def _tell(line: str) -> None:
     """Send a line to the watchdog (started on first use); ignored when it is gone."""
-    global _watchdog
-    if _watchdog is None:
-        _watchdog = subprocess.Popen(
-            [sys.executable, "-I", "-S", "-c", _WATCHDOG_SOURCE],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-            start_new_session=True,  # neither a terminal's ^C nor a signal to our group
-        )
-    pipe = _watchdog.stdin
+    global _watchdog, _no_watchdog
+    if _watchdog is None and not _no_watchdog:
+        try:
+            _watchdog = subprocess.Popen(
+                [sys.executable, "-I", "-S", "-c", _WATCHDOG_SOURCE],
+                stdin=subprocess.PIPE,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+                start_new_session=True,  # neither a terminal's ^C nor a signal to our group
+            )
+        except OSError:
+            _no_watchdog = True
+    pipe = _watchdog.stdin if _watchdog is not None else None
     if pipe is None:
         return
     try:
@@ -97,14 +101,19 @@ def finished(proc: subprocess.Popen) -> bool:
 
 
 def kill(proc: subprocess.Popen) -> None:
-    """Stop a child of :func:`spawn` and everything in its process group, and reap it."""
+    """Stop a child of :func:`spawn` and everything in its process group, and reap it (after
+    unlisting it, as :func:`finished` does)."""
     if proc.returncode is None:
         try:
             os.killpg(proc.pid, signal.SIGKILL)
         except OSError:
             pass
-        proc.wait()
+        try:
+            os.waitid(os.P_PID, proc.pid, os.WEXITED | os.WNOWAIT)  # dead, not yet reaped
+        except ChildProcessError:
+            pass
     _forget(proc)
+    proc.wait()
 
 
 def kill_all() -> None:

@@ -290,6 +290,8 @@ def _run(commands: list[tuple[list[str], str, Path]], jobs: int, deadline: float
     try:
         while queue or running:
             while queue and len(running) < jobs:
+                if _EXITING:  # the process is ending: start no other compiler
+                    raise RuntimeError("the process is exiting")
                 cmd, what, log = queue.pop(0)
                 running.append((_lifeline.spawn(cmd, log), what, log))
             done = [job for job in running if _lifeline.finished(job[0])]
