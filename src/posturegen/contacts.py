@@ -39,6 +39,9 @@ def polygon_in_surface(patch: Patch, T_surface_patch: pin.SE3) -> ConvexPolygon:
     return ConvexPolygon(pts[:, :2])
 
 
+FRICTION_KINDS = ("pyramid", "cone")
+
+
 @dataclass(frozen=True)
 class FrictionModel:
     """Friction cone |f_t| <= μ f_n, exactly (``cone``) or as an inscribed pyramid with
@@ -46,6 +49,18 @@ class FrictionModel:
 
     kind: str = "pyramid"  # "pyramid" | "cone"
     faces: int = 4
+
+    def __post_init__(self) -> None:
+        if self.kind not in FRICTION_KINDS:
+            raise InputError(
+                "friction.model",
+                f"unknown friction model {self.kind!r}",
+                f"use one of: {', '.join(FRICTION_KINDS)}",
+            )
+        if isinstance(self.faces, bool) or not isinstance(self.faces, int) or self.faces < 3:
+            raise InputError(
+                "friction.faces", f"expected an integer >= 3, got {self.faces!r}", "use 4 or 8"
+            )
 
     def constraints(self, phi: ca.SX, mu: ca.SX) -> ca.SX:
         """Rows that must be <= 0 for local force φ = (f_t, f_n) (3,)."""
@@ -142,9 +157,10 @@ class FixedContact(Contact):
     """A robot patch at a given pose on a surface, bearing forces at the vertices of the
     intersection of the two polygons (paper sec. IV-E).
 
-    Pose: ``R_tᵀ(p_c - p_t) = 0`` and the three skew components of ``R_tᵀR_c`` vanish, with
-    ``T_t = T_world_surface·T_surface_patch`` the target. Forces: one f = W·R_s·φ per point,
-    φ_n >= 0 and the friction model on φ, W the robot's weight.
+    Pose: ``R_tᵀ(p_c - p_t) = 0``; E = R_tᵀR_c has E[2,0] = E[2,1] = E[1,0] = 0 and
+    trace(E) >= 0 (the equalities alone also admit the rotations by π about x, y or z, of
+    trace -1), with ``T_t = T_world_surface·T_surface_patch`` the target. Forces: one
+    f = W·R_s·φ per point, φ_n >= 0 and the friction model on φ, W the robot's weight.
     """
 
     name: str
@@ -195,6 +211,8 @@ class FixedContact(Contact):
         E = Rt.T @ R_c
         nlp.constrain(f"{pre}.position", Rt.T @ (p_c - pt), 0.0, 0.0)
         nlp.constrain(f"{pre}.orientation", ca.vertcat(E[2, 0], E[2, 1], E[1, 0]), 0.0, 0.0)
+        # those rows also hold for E = Rz(π), Rx(π), Ry(π) (trace -1): keep the trace >= 0
+        nlp.constrain(f"{pre}.orientation_branch", ca.trace(E), 0.0, np.inf)
         pts = ca.reshape(nlp.parameter(f"{pre}.points_joint", 3 * k), 3, k)
         R_j, p_j = ctx.state.R[self.patch.joint_id], ctx.state.p[self.patch.joint_id]
         points = [p_j + R_j @ pts[:, i] for i in range(k)]

@@ -5,6 +5,7 @@ Every mistake raises one :class:`~posturegen.errors.InputError` naming the field
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +17,7 @@ from . import _fields as F
 from .collision import CollisionOptions, excluded_joint_ids
 from .constraints import PositionTask
 from .contacts import (
+    FRICTION_KINDS,
     Contact,
     EllipseOptions,
     FixedContact,
@@ -27,6 +29,7 @@ from .contacts import (
 )
 from .costs import ForceCost, PostureCost, TorqueCost
 from .errors import InputError
+from .placement import place_on_fixed_contacts
 from .problem import Problem, SolverOptions, Term
 from .robot import Robot, load_robot
 from .scene import Scene
@@ -77,7 +80,7 @@ def _friction(value: Any, field: str) -> FrictionModel:
     v = F.require_mapping(value, field)
     F.check_keys(v, field, ["model"], ["faces"])
     kind = F.string(v["model"], f"{field}.model")
-    if kind not in ("pyramid", "cone"):
+    if kind not in FRICTION_KINDS:
         raise InputError(
             f"{field}.model", f"unknown friction model '{kind}'", "use pyramid or cone"
         )
@@ -304,6 +307,8 @@ def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
         options.get("torque_limit_scale", 1.0), "options.torque_limit_scale", positive=True
     )
     q_init = robot.initial_configuration(options.get("initial"), "options.initial")
+    if not _gives_base(options.get("initial")):  # a name, joints or nothing: place the base
+        q_init = place_on_fixed_contacts(robot, q_init, contacts)
     self_collision = _flag(options.get("self_collision", False), "options.self_collision")
     env = options.get("environment_collision", "auto")
     if env != "auto":
@@ -340,6 +345,12 @@ def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
         solver,
         collision,
     )
+
+
+def _gives_base(initial: Any) -> bool:
+    """Whether ``options.initial`` gives the base placement (the nq numbers of q), rather than
+    a reference posture's name, a joint mapping or nothing (the robot's default)."""
+    return initial is not None and not isinstance(initial, str | Mapping)
 
 
 def _flag(value: Any, field: str) -> bool:
