@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from posturegen import problem_from_dict, solve
-from posturegen.contacts import FrictionModel, patch_in_surface, polygon_in_surface
+from posturegen.contacts import patch_in_surface, polygon_in_surface
 from posturegen.errors import InputError
+from posturegen.friction import FrictionModel
 from posturegen.geometry import Ellipse, intersect, largest_inscribed_ellipse
 from posturegen.stance import next_problem
 from posturegen.verify import verify_posture

@@ -17,11 +17,9 @@ from . import _fields as F
 from .collision import CollisionOptions, excluded_joint_ids
 from .constraints import PositionTask
 from .contacts import (
-    FRICTION_KINDS,
     Contact,
     EllipseOptions,
     FixedContact,
-    FrictionModel,
     GeometricContact,
     InclusiveContact,
     PointContact,
@@ -29,6 +27,7 @@ from .contacts import (
 )
 from .costs import ForceCost, PostureCost, TorqueCost
 from .errors import InputError
+from .friction import FRICTION_KINDS, FrictionModel
 from .placement import place_on_fixed_contacts
 from .problem import Problem, SolverOptions, Term
 from .robot import Robot, load_robot

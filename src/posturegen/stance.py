@@ -6,8 +6,9 @@ from __future__ import annotations
 
 import dataclasses
 
-from .contacts import FixedContact, FrictionModel
+from .contacts import FixedContact
 from .errors import InputError
+from .friction import FrictionModel
 from .problem import Problem
 from .solve import Result
 
