@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 
 from .contacts import FixedContact
+from .cop import DEFAULT_COP_MARGIN
 from .errors import InputError
 from .friction import FrictionModel
 from .problem import Problem
@@ -22,7 +23,8 @@ def next_problem(
 ) -> Problem:
     """The problem of the next stance: contact ``fix`` (geometric, support, inclusive or point)
     frozen at its pose in ``result`` as a ``fixed`` contact (a contact already fixed stays as
-    it is: ``result`` realized its pose), contact ``release`` removed, the
+    it is: ``result`` realized its pose) with the CoP margin of the contact, or else of the
+    problem, contact ``release`` removed, the
     posture of ``result`` as the initial posture (warm start), ``tasks`` replacing the tasks
     when given."""
     names = [c.name for c in problem.contacts]
@@ -42,7 +44,17 @@ def next_problem(
     else:
         position, yaw = old.realized_pose(problem.robot.model, result.q)
         friction = getattr(old, "friction", FrictionModel())
-        fixed = FixedContact(old.name, old.patch, old.surface, position, yaw, old.mu, friction)
+        margin = getattr(old, "cop_margin", problem.cop_margin)
+        fixed = FixedContact(
+            old.name,
+            old.patch,
+            old.surface,
+            position,
+            yaw,
+            old.mu,
+            friction,
+            cop_margin=DEFAULT_COP_MARGIN if margin is None else margin,
+        )
     contacts = [fixed if c.name == fix else c for c in problem.contacts if c.name != release]
     return dataclasses.replace(
         problem,
