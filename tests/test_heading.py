@@ -21,7 +21,7 @@ def feet_at(robot: str, yaw: float, half_width: float = 0.1, options: dict | Non
     side = np.array([-np.sin(yaw), np.cos(yaw)]) * half_width
     return {
         "robot": robot,
-        "surfaces": [GROUND],
+        "surfaces": [dict(GROUND)],
         "contacts": [
             {
                 "robot_patch": "left_sole",
@@ -117,3 +117,26 @@ def test_fit_yaw_translation_recovers_a_rigid_motion(points, yaw, t):
     fit_yaw, fit_t = fit_yaw_translation(a, b)
     assert fit_yaw == pytest.approx(yaw, abs=1e-9)
     np.testing.assert_allclose(fit_t, t, atol=1e-9)
+
+
+def test_the_placed_height_is_that_of_the_surfaces_stood_on(talos):
+    """Feet fixed on a 0.3 m platform lift the placed posture by 0.3 m; a hand fixed high on
+    a wall does not lift the feet off the ground."""
+    platform = feet_at("talos", 0.0)
+    platform["surfaces"][0]["position"] = [0.0, 0.0, 0.3]
+    lifted = problem_from_dict(platform)
+    assert lifted.q_init[2] == pytest.approx(talos.q_init[2] + 0.3, abs=1e-5)  # sole origins
+    braced = feet_at("talos", 0.0)
+    braced["surfaces"].append(
+        {
+            "name": "wall",
+            "position": [0.1, 0.6, 1.4],
+            "rpy": [np.pi / 2, 0.0, 0.0],  # facing -y, towards the robot
+            "vertices": [[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]],
+        }
+    )
+    braced["contacts"].append(
+        {"robot_patch": "left_hand", "surface": "wall", "type": "fixed", "position": [0, 0]}
+    )
+    problem = problem_from_dict(braced)
+    assert problem.q_init[2] == pytest.approx(talos.q_init[2], abs=1e-5)

@@ -19,6 +19,8 @@ from .robot import Robot
 
 # [m] the arm of the frame points that carry a patch's orientation into the fit
 _AXIS_LENGTH = 0.1
+# a fixed contact is stood on when its patch's outward normal points down within 30°
+_COS_30 = float(np.cos(np.radians(30.0)))
 
 
 def _frame_points(T: pin.SE3) -> np.ndarray:
@@ -39,9 +41,10 @@ def fit_yaw_translation(a: np.ndarray, b: np.ndarray) -> tuple[float, np.ndarray
 
 def place_on_fixed_contacts(robot: Robot, q: np.ndarray, contacts: Sequence[Any]) -> np.ndarray:
     """q (nq,) with its base turned by ψ about the world z axis and moved by t (the same
-    joints), (ψ, t) the least-squares fit of the fixed contacts' patch frames at q to their
-    targets (origins and axis tips, :func:`fit_yaw_translation`). Without a fixed contact,
-    q unchanged (a copy)."""
+    joints): ψ and the horizontal t the least-squares fit of the fixed contacts' patch frames
+    at q to their targets (origins and axis tips, :func:`fit_yaw_translation`); t_z the mean
+    rise from the patch origins to their targets of the contacts stood on (patch normal
+    within 30° of straight down), 0 without one. Without a fixed contact, q unchanged."""
     q = np.array(q, dtype=float)
     fixed = [c for c in contacts if isinstance(c, FixedContact)]
     if not fixed:
@@ -51,6 +54,9 @@ def place_on_fixed_contacts(robot: Robot, q: np.ndarray, contacts: Sequence[Any]
     here = [_frame_points(data.oMf[c.patch.frame_id] * c.patch.T_frame_patch) for c in fixed]
     there = [_frame_points(c.T_world_target) for c in fixed]
     yaw, t = fit_yaw_translation(np.vstack(here), np.vstack(there))
+    # the height comes from what the robot stands on (a hand on a wall would lift its feet)
+    standing = [k for k, c in enumerate(fixed) if c.T_world_target.rotation[2, 2] < -_COS_30]
+    t[2] = np.mean([there[k][0, 2] - here[k][0, 2] for k in standing]) if standing else 0.0
     Rz = pin.utils.rotate("z", yaw)
     R_base = pin.Quaternion(q[3:7]).normalized().matrix()
     q[0:3] = Rz @ q[0:3] + t
