@@ -4,6 +4,7 @@ and point contacts, area maximization, thin patches and the next stance."""
 from __future__ import annotations
 
 import copy
+import dataclasses
 
 import casadi as ca
 import numpy as np
@@ -11,6 +12,7 @@ import pytest
 
 from posturegen import problem_from_dict, solve
 from posturegen.contacts import patch_in_surface, polygon_in_surface
+from posturegen.cop import DEFAULT_COP_MARGIN
 from posturegen.errors import InputError
 from posturegen.friction import FrictionModel
 from posturegen.geometry import Ellipse, intersect, largest_inscribed_ellipse
@@ -154,6 +156,10 @@ def test_next_stance_fixes_the_geometric_contact():
     assert fixed.n_points == inter.n  # forces at the intersection's vertices (sec. IV-E)
     np.testing.assert_allclose(fixed.area.vertices, inter.vertices, atol=1e-9)
     np.testing.assert_allclose(nxt.q_init, r.q)
+    # a geometric contact has no CoP margin: the fixed one takes the problem's
+    assert fixed.cop_margin == DEFAULT_COP_MARGIN
+    wider = dataclasses.replace(problem, cop_margin=0.02)
+    assert next_problem(wider, r, fix="right_sole").contacts[1].cop_margin == 0.02
     r2 = solve(nxt)
     assert r2.success, r2.message
     assert r2.iterations < 60
