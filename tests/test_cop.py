@@ -147,7 +147,7 @@ def test_hands_on_a_table_lie_flat_with_the_defaults(talos):
 def test_the_foot_left_on_a_step_edge_keeps_its_cop_inside(margin):
     """README-style stance: the right foot found on a 12 cm step (support, defaults), then
     fixed, the left foot released, so the CoP must go towards the ground foot's side. Before:
-    an intersection of 4.6 cm² and all 886 N on one vertex of the toe. Now the intersection
+    an intersection of 10.5 cm² and all 886 N on one vertex of the toe. Now the intersection
     holds a disc of 3/4 of the sole's inradius and the CoP keeps the margin (default 5 mm);
     with cop_margin 0 it goes to the edge: the margin is what keeps it inside."""
     data = step_problem({"type": "support"})
