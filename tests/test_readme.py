@@ -35,15 +35,6 @@ README = Path(__file__).resolve().parent.parent / "README.md"
 CHECKED = {"python", "yaml", "json"}
 NOT_RUN = {"sh"}  # CI runs them, as the README says
 
-# Blocks expected to fail on this branch, by a line of their code, with an InputError: strict,
-# so the mark must go when the behaviour is fixed.
-EXPECTED_FAILURES = {
-    'next_problem(problem, result, fix="right_sole", release="left_sole")': (
-        "issue 15: the README's problem has both feet fixed, and next_problem raises "
-        "\"contact 'right_sole' is already fixed\" (fixed on branch issue15-contacts)"
-    ),
-}
-
 
 @dataclass(frozen=True)
 class Block:
@@ -81,16 +72,8 @@ BLOCKS = readme_blocks(README.read_text(encoding="utf-8"))
 PYTHON = [b for b in BLOCKS if b.lang == "python"]
 
 
-def _marks(block: Block) -> list[Any]:
-    return [
-        pytest.mark.xfail(strict=True, raises=pg.InputError, reason=reason)
-        for line, reason in EXPECTED_FAILURES.items()
-        if line in block.code
-    ]
-
-
 def _params(lang: str) -> list[Any]:
-    return [pytest.param(b, id=b.id, marks=_marks(b)) for b in BLOCKS if b.lang == lang]
+    return [pytest.param(b, id=b.id) for b in BLOCKS if b.lang == lang]
 
 
 def _problem_block() -> Block:

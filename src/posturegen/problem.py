@@ -346,6 +346,9 @@ class Problem:
     torque_limit_scale: float = 1.0  # |τ_j| <= scale·effort_j
     solver_options: SolverOptions = field(default_factory=SolverOptions)
     collision_options: Any = None  # posturegen.collision.CollisionOptions; None: no avoidance
+    # [m] CoP margin of force-bearing contacts made from this problem's (posturegen.stance);
+    # None: posturegen.cop.DEFAULT_COP_MARGIN
+    cop_margin: float | None = None
     # the active collision rows of the current solve (set by posturegen.solve)
     collision_term: Term | None = None
     # hard rows relaxed by L1-penalized slacks (posturegen.elastic; the diagnosis of a

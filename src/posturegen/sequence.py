@@ -125,8 +125,10 @@ def _kept(
         position, yaw = old.realized_pose(previous.robot.model, q_prev)
     else:  # pragma: no cover - every contact type is one of the two
         raise InputError(f"{fld}.type", f"cannot keep contact '{name}'", "fix it explicitly")
-    out = {k: v for k, v in c.items() if k in ("name", "mu", "friction")}
+    out = {k: v for k, v in c.items() if k in ("name", "mu", "friction", "cop_margin")}
     out.setdefault("mu", float(old.mu))  # a kept contact keeps its friction coefficient
+    if hasattr(old, "cop_margin"):  # and its CoP margin (else the stage's options give it)
+        out.setdefault("cop_margin", float(old.cop_margin))
     out.update(
         {
             "robot_patch": old.patch.name,

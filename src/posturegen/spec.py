@@ -5,6 +5,7 @@ Every mistake raises one :class:`~posturegen.errors.InputError` naming the field
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -17,17 +18,19 @@ from .collision import CollisionOptions, excluded_joint_ids
 from .constraints import PositionTask
 from .contacts import (
     Contact,
-    EllipseOptions,
     FixedContact,
-    FrictionModel,
     GeometricContact,
     InclusiveContact,
     PointContact,
     SupportContact,
 )
+from .cop import DEFAULT_COP_MARGIN
 from .costs import ForceCost, PostureCost, TorqueCost
+from .ellipse_options import EllipseOptions
 from .errors import InputError
+from .friction import FRICTION_KINDS, FrictionModel
 from .hints import with_hint
+from .placement import place_on_fixed_contacts
 from .plausible import check_angles, check_target
 from .problem import Problem, SolverOptions, Term
 from .robot import Robot, load_robot
@@ -79,7 +82,7 @@ def _friction(value: Any, field: str) -> FrictionModel:
     v = F.require_mapping(value, field)
     F.check_keys(v, field, ["model"], ["faces"])
     kind = F.string(v["model"], f"{field}.model")
-    if kind not in ("pyramid", "cone"):
+    if kind not in FRICTION_KINDS:
         raise InputError(
             f"{field}.model",
             f"unknown friction model '{kind}'",
@@ -93,9 +96,9 @@ def _friction(value: Any, field: str) -> FrictionModel:
 
 _ELLIPSE_KEYS = ["formulation", "min_radii", "min_area", "maximize_area", "scaling"]
 _CONTACT_KEYS = {
-    "fixed": ["position", "yaw", "mu", "friction"],
+    "fixed": ["position", "yaw", "mu", "friction", "cop_margin"],
     "geometric": [*_ELLIPSE_KEYS, "yaw_range"],
-    "support": [*_ELLIPSE_KEYS, "points", "mu", "friction", "yaw_range"],
+    "support": [*_ELLIPSE_KEYS, "points", "mu", "friction", "yaw_range", "cop_margin"],
     "inclusive": ["yaw_range"],
     "point": ["point", "yaw_range"],
 }
@@ -155,6 +158,7 @@ def _contact(
     mu: float,
     friction: FrictionModel,
     names: set[str],
+    cop_margin: float = DEFAULT_COP_MARGIN,
 ) -> Contact:
     fld = f"contacts[{i}]"
     c = F.require_mapping(c, fld)
@@ -179,6 +183,7 @@ def _contact(
     mu_c = F.number(c.get("mu", mu), f"{fld}.mu", minimum=0.0)
     fric = _friction(c["friction"], f"{fld}.friction") if "friction" in c else friction
     yr = _yaw_range(c, fld)
+    cop = F.number(c.get("cop_margin", cop_margin), f"{fld}.cop_margin", minimum=0.0)
     if ctype == "geometric":
         return GeometricContact(name, patch, surface, mu_c, _ellipse_options(c, fld), yaw_range=yr)
     if ctype == "support":
@@ -186,7 +191,9 @@ def _contact(
         if isinstance(k, bool) or not isinstance(k, int) or k < 4:
             raise InputError(f"{fld}.points", f"expected an integer >= 4, got {k!r}", "use 8")
         ell = _ellipse_options(c, fld)
-        return SupportContact(name, patch, surface, mu_c, ell, k, fric, yaw_range=yr)
+        return SupportContact(
+            name, patch, surface, mu_c, ell, k, fric, yaw_range=yr, cop_margin=cop
+        )
     if ctype == "inclusive":
         return InclusiveContact(name, patch, surface, mu_c, yaw_range=yr)
     if ctype == "point":
@@ -207,9 +214,11 @@ def _contact(
     pos = F.vector(c["position"], 2, f"{fld}.position")
     yaw = F.angle(c.get("yaw", 0.0), f"{fld}.yaw")
     try:
-        return FixedContact(name, patch, surface, pos, yaw, mu_c, fric)
+        return FixedContact(name, patch, surface, pos, yaw, mu_c, fric, cop_margin=cop)
     except InputError as exc:
-        raise InputError(fld, exc.problem, exc.fix) from exc
+        raise InputError(
+            f"{fld}.cop_margin" if exc.field == "cop_margin" else fld, exc.problem, exc.fix
+        ) from exc
 
 
 def _task(t: Any, i: int, robot: Robot) -> PositionTask:
@@ -296,8 +305,9 @@ def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
     if not isinstance(contacts_raw, list) or not contacts_raw:
         raise InputError("contacts", "expected a non-empty list", "add at least one contact")
     names: set[str] = set()
+    cop = _cop_margin(data.get("options"))
     contacts = [
-        _contact(c, i, robot, scene, mu, friction, names) for i, c in enumerate(contacts_raw)
+        _contact(c, i, robot, scene, mu, friction, names, cop) for i, c in enumerate(contacts_raw)
     ]
     tasks_raw = data.get("tasks", []) or []
     if not isinstance(tasks_raw, list):
@@ -318,12 +328,15 @@ def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
             "environment_collision",
             "collision_margin",
             "collision_exclude",
+            "cop_margin",
         ],
     )
     torque_scale = F.number(
         options.get("torque_limit_scale", 1.0), "options.torque_limit_scale", positive=True
     )
     q_init = robot.initial_configuration(options.get("initial"), "options.initial")
+    if not _gives_base(options.get("initial")):  # a name, joints or nothing: place the base
+        q_init = place_on_fixed_contacts(robot, q_init, contacts)
     self_collision = _flag(options.get("self_collision", False), "options.self_collision")
     collision = _collision_options(options, robot, scene, self_collision)
     solver = _solver_options(options.get("solver", {}) or {})
@@ -338,6 +351,7 @@ def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
         torque_scale,
         solver,
         collision,
+        cop_margin=cop,
     )
 
 
@@ -368,6 +382,20 @@ def _collision_options(
     )
     excluded_joint_ids(robot, collision)  # names are checked here
     return collision
+
+
+def _cop_margin(options: Any) -> float:
+    """``options.cop_margin`` [m], the default of every force-bearing contact."""
+    value = options.get("cop_margin") if isinstance(options, Mapping) else None
+    if value is None:
+        return DEFAULT_COP_MARGIN
+    return F.number(value, "options.cop_margin", minimum=0.0)
+
+
+def _gives_base(initial: Any) -> bool:
+    """Whether ``options.initial`` gives the base placement (the nq numbers of q), rather than
+    a reference posture's name, a joint mapping or nothing (the robot's default)."""
+    return initial is not None and not isinstance(initial, str | Mapping)
 
 
 def _flag(value: Any, field: str) -> bool:
