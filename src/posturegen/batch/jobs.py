@@ -1,0 +1,185 @@
+"""What travels to a worker and back: a :class:`Job` per problem, a :class:`BatchItem` per
+answer.
+
+A Job carries the problem as its problem-file dict (cheap to send, rebuilt by the worker with
+``problem_from_dict``), or as a :class:`~posturegen.problem.Problem` pickled with its robot *by
+name*: the worker's ``load_bundled(name)`` gives its own cached robot, so that the structure
+keys (which hold ``id(robot.model)``) match and the worker's solvers are reused from one problem
+to the next. A Problem built on a robot loaded from a URDF cannot travel (its patch file is not
+recorded): pass its problem dict or file instead.
+
+A BatchItem carries the frozen :class:`~posturegen.solve.Result` (it pickles: about 8 kB for
+Talos), or a :class:`BatchError` when the problem gave no Result at all.
+"""
+
+from __future__ import annotations
+
+import copyreg
+import dataclasses
+import io
+import os
+import pickle
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ..errors import InputError
+from ..geometry import ConvexPolygon
+from ..problem import Problem
+from ..robot import Robot, load_bundled
+from ..solve import Result
+from ..spec import read_yaml
+
+# what BatchError.status says
+INPUT_ERROR, ERROR, CRASHED = "input error", "error", "worker crashed"
+
+
+@dataclass(frozen=True)
+class BatchError:
+    """A problem that gave no Result: an input that cannot be read or built (``input
+    error``), an exception while solving (``error``), or a worker process that died while
+    solving it (``worker crashed``). ``success`` is False, as for a failed Result."""
+
+    name: str
+    status: str
+    message: str  # one line
+
+    @property
+    def success(self) -> bool:
+        """Always False: no posture."""
+        return False
+
+    @property
+    def diagnosis(self) -> str:
+        """The message (a Result's diagnosis says why no posture was found)."""
+        return self.message
+
+
+@dataclass(frozen=True)
+class Job:
+    """One problem of a batch: ``problem`` is a problem-file dict (relative robot paths from
+    ``base_dir``) or a pickled Problem (bytes); ``error`` set: the input could not be read
+    and the worker answers with it."""
+
+    index: int  # position in the input
+    name: str  # stem of the posture file
+    problem: Mapping[str, Any] | bytes | None
+    base_dir: str | None = None
+    error: str = ""
+
+
+@dataclass(frozen=True)
+class BatchItem:
+    """The answer to one Job: ``call_time_s`` is the whole call in the worker (the problem
+    built, solved, re-checked, and diagnosed when asked) [s]; ``worker`` is ``host:pid``;
+    ``warnings`` are the warnings it raised, (category, message)."""
+
+    index: int
+    name: str
+    result: Result | BatchError
+    call_time_s: float
+    worker: str
+    warnings: tuple[tuple[type[Warning], str], ...] = ()
+
+
+@dataclass(frozen=True)
+class Unreadable:
+    """An input that could not be read (a stdin line that is not JSON): its item fails with
+    ``message``, the batch goes on."""
+
+    name: str
+    message: str
+
+
+class _Unshippable(Exception):
+    """A Problem whose robot cannot be named to a worker."""
+
+
+def _robot_by_name(robot: Robot) -> tuple[Any, tuple[str]]:
+    """Pickle a bundled robot as ``load_bundled(name)``: the worker's own cached copy."""
+    try:
+        bundled = load_bundled(robot.name) is robot
+    except InputError:
+        bundled = False
+    if not bundled:
+        raise _Unshippable(robot.name)
+    return load_bundled, (robot.name,)
+
+
+def _polygon(polygon: ConvexPolygon) -> tuple[Any, tuple[Any]]:
+    """Pickle a polygon as its vertices (it is immutable: no state to set)."""
+    return ConvexPolygon, (polygon.vertices,)
+
+
+class _ProblemPickler(pickle.Pickler):
+    dispatch_table = {
+        **copyreg.dispatch_table,
+        Robot: _robot_by_name,
+        ConvexPolygon: _polygon,
+    }
+
+
+def pack_problem(problem: Problem) -> bytes:
+    """A Problem as bytes for a worker (its robot by name, without the collision rows of its
+    last solve, which solve() rebuilds)."""
+    buffer = io.BytesIO()
+    _ProblemPickler(buffer, protocol=pickle.HIGHEST_PROTOCOL).dump(
+        dataclasses.replace(problem, collision_term=None)
+    )
+    return buffer.getvalue()
+
+
+def _unique(names: list[str]) -> list[str]:
+    """Names made unique by a suffix (``a``, ``a-2``, ``a-3``); ``batch`` (the index file's
+    stem) is taken too."""
+    seen: dict[str, int] = {"batch": 1}
+    out = []
+    for name in names:
+        count = seen.get(name, 0) + 1
+        seen[name] = count
+        out.append(name if count == 1 else f"{name}-{count}")
+    return out
+
+
+def _job(index: int, item: Any) -> Job:
+    """The Job of one input: a Problem, a problem dict, or a problem file's path."""
+    if isinstance(item, Problem):
+        try:
+            return Job(index, f"problem-{index:04d}", pack_problem(item))
+        except _Unshippable as exc:
+            fix = "pass its problem dict or file: a robot loaded from a URDF travels by its file"
+            return Job(index, f"problem-{index:04d}", None, error=_input_error(index, exc, fix))
+    if isinstance(item, Mapping):
+        name = item.get("name")
+        stem = name if isinstance(name, str) and name else f"problem-{index:04d}"
+        return Job(index, _safe(stem), item, base_dir=os.getcwd())
+    if isinstance(item, str | Path):
+        path = Path(item)
+        try:
+            data = read_yaml(path)
+        except InputError as exc:
+            return Job(index, _safe(path.stem), None, error=str(exc))
+        return Job(index, _safe(path.stem), data, base_dir=str(path.resolve().parent))
+    if isinstance(item, Unreadable):
+        return Job(index, _safe(item.name), None, error=item.message)
+    kind = type(item).__name__
+    fix = "give a Problem, a problem dict or the path of a problem file"
+    return Job(index, f"problem-{index:04d}", None, error=f"problems[{index}]: a {kind} ({fix})")
+
+
+def _input_error(index: int, exc: Exception, fix: str) -> str:
+    return f"problems[{index}]: robot '{exc}' is not a bundled robot ({fix})"
+
+
+def _safe(stem: str) -> str:
+    """A file stem without path separators or leading dots."""
+    cleaned = "".join(c if c.isalnum() or c in "-_." else "_" for c in stem).lstrip(".")
+    return cleaned or "problem"
+
+
+def make_jobs(problems: Iterable[Any]) -> list[Job]:
+    """One Job per input, in order, with unique names."""
+    jobs = [_job(i, item) for i, item in enumerate(problems)]
+    names = _unique([j.name for j in jobs])
+    return [dataclasses.replace(j, name=n) for j, n in zip(jobs, names, strict=True)]
