@@ -1,5 +1,5 @@
-"""``posturegen bench --batch``: postures per second of one seeded family in one process, on 1
-to ``os.cpu_count()`` local workers, and on a local Ray instance.
+"""``posturegen bench --batch``: postures per second of one seeded family in one process, on 1,
+2 and ``os.cpu_count()`` local workers, and on a local Ray instance.
 
 Each configuration starts its workers, has each solve the family's warm-up problem (its solver
 structure built, like the first solve of ``posturegen bench``) and waits for all of them; then
@@ -129,8 +129,8 @@ def in_process(warm: Job, jobs: list[Job]) -> ScalingRow:
     return _row("in-process", 1, items, t1 - t0, t2 - t1, [worker_info()])
 
 
-def on_backend(backend: str, workers: int, warm: Job, jobs: list[Job]) -> ScalingRow:
-    """The n problems on ``workers`` warm workers of ``backend``."""
+def on_backend(backend: str, workers: int | None, warm: Job, jobs: list[Job]) -> ScalingRow:
+    """The n problems on ``workers`` warm workers of ``backend`` (None: its default)."""
     t0 = time.perf_counter()
     pool = open_backend(backend, workers, warm=[warm])
     try:
@@ -152,11 +152,13 @@ def batch_scaling(
     ray: bool = True,
     done: Callable[[ScalingRow], None] | None = None,
 ) -> list[ScalingRow]:
-    """The rows: in-process, local with 1 to os.cpu_count() workers, Ray with as many (when
+    """The rows: in-process, local with 1, 2 and os.cpu_count() workers, Ray on every CPU of
+    its instance (a local one of os.cpu_count() CPUs unless this process joined one: when
     ``ray``); each speed-up is over the 1-worker local row."""
     warm, jobs = family_jobs(family, n, seed, jit)
-    cpus = os.cpu_count() or 1
-    plans = [("local", w) for w in range(1, cpus + 1)] + ([("ray", cpus)] if ray else [])
+    counts = sorted({1, min(2, os.cpu_count() or 1), os.cpu_count() or 1})
+    plans: list[tuple[str, int | None]] = [("local", w) for w in counts]
+    plans += [("ray", None)] if ray else []
     rows = [in_process(warm, jobs)]
     if done is not None:
         done(rows[0])

@@ -3,7 +3,6 @@ the summary table."""
 
 from __future__ import annotations
 
-import sys
 import time
 import warnings
 from pathlib import Path
@@ -27,20 +26,23 @@ def batch_to_dir(
     workers: int | None = None,
     address: str | None = None,
     quiet: bool = False,
-    stream: TextIO = sys.stderr,
+    stream: TextIO | None = None,
 ) -> Summary:
     """Solve ``problems`` (diagnosing failures, as ``posturegen solve``), write each posture
     file ``OUT/NAME.json`` as it comes and ``OUT/batch.json`` at the end; the progress bar
-    and the workers' warnings (``NAME: message``) go to ``stream``. The wall time counts the
-    workers' start."""
+    goes to ``stream`` (default: sys.stderr), the workers' warnings (``NAME: message``) to
+    ``warnings``. The wall time counts the workers' start (``start_s``: until every worker
+    is up)."""
     t0 = time.perf_counter()
     jobs = make_jobs(problems)
     pool = open_backend(backend, workers, address, diagnose=True)
     out.mkdir(parents=True, exist_ok=True)
-    progress = Progress(len(jobs), stream, quiet)
     items: list[BatchItem] = []
     entries: dict[int, dict[str, Any]] = {}
     try:
+        pool.ready()
+        started = time.perf_counter()
+        progress = Progress(len(jobs), stream, quiet)
         for item in run_jobs(pool, jobs):
             items.append(item)
             posture = write_posture(item, out)
@@ -52,6 +54,7 @@ def batch_to_dir(
             progress.update(item)
     finally:
         pool.close()
-    summary = Summary.of(items, time.perf_counter() - t0, pool.workers, backend)
+    wall = time.perf_counter() - t0
+    summary = Summary.of(items, wall, pool.workers, backend, started - t0)
     write_index(out, [entries[i] for i in sorted(entries)], summary)
     return summary

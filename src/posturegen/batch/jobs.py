@@ -131,14 +131,17 @@ def pack_problem(problem: Problem) -> bytes:
 
 
 def _unique(names: list[str]) -> list[str]:
-    """Names made unique by a suffix (``a``, ``a-2``, ``a-3``); ``batch`` (the index file's
-    stem) is taken too."""
-    seen: dict[str, int] = {"batch": 1}
+    """Names made unique by a suffix (``a``, ``a-2``, ``a-3``: the first free one); ``batch``
+    (the index file's stem) is taken too."""
+    taken = {"batch"}
     out = []
     for name in names:
-        count = seen.get(name, 0) + 1
-        seen[name] = count
-        out.append(name if count == 1 else f"{name}-{count}")
+        candidate, k = name, 1
+        while candidate in taken:
+            k += 1
+            candidate = f"{name}-{k}"
+        taken.add(candidate)
+        out.append(candidate)
     return out
 
 

@@ -54,7 +54,8 @@ def percentile(values: Sequence[float], q: float) -> float:
 @dataclass(frozen=True)
 class Summary:
     """Counts by category, times of the whole calls in the workers and of IPOPT [s], the
-    batch's wall time [s] and its rate [postures/s]."""
+    batch's wall time [s] (``start_s`` of it starting the workers) and its rate
+    [postures/s]."""
 
     n: int
     counts: tuple[tuple[str, int], ...]  # verified first, then the failures, most first
@@ -63,9 +64,17 @@ class Summary:
     wall_s: float
     workers: int
     backend: str
+    start_s: float = 0.0
 
     @classmethod
-    def of(cls, items: Sequence[BatchItem], wall_s: float, workers: int, backend: str) -> Summary:
+    def of(
+        cls,
+        items: Sequence[BatchItem],
+        wall_s: float,
+        workers: int,
+        backend: str,
+        start_s: float = 0.0,
+    ) -> Summary:
         counts = Counter(category(i.result) for i in items)
         ordered = [(VERIFIED, counts.pop(VERIFIED, 0)), *counts.most_common()]
         return cls(
@@ -78,6 +87,7 @@ class Summary:
             wall_s=wall_s,
             workers=workers,
             backend=backend,
+            start_s=start_s,
         )
 
     @property
@@ -94,7 +104,8 @@ class Summary:
         """The summary table."""
         out = [
             f"batch: {self.n} problems, {self.workers} workers ({self.backend}), "
-            f"{self.wall_s:.1f} s, {self.rate:.1f} postures/s",
+            f"{self.wall_s:.1f} s ({self.start_s:.1f} s to start them), "
+            f"{self.rate:.1f} postures/s",
         ]
         for name, count in self.counts:
             label = name if name == VERIFIED else f"failed, {name}"
@@ -110,6 +121,7 @@ class Summary:
             "problems": self.n,
             "counts": dict(self.counts),
             "wall_s": self.wall_s,
+            "start_s": self.start_s,
             "postures_per_s": self.rate,
             "workers": self.workers,
             "backend": self.backend,
@@ -156,11 +168,12 @@ def write_index(out: Path, entries: list[dict[str, Any]], summary: Summary) -> P
 
 
 class Progress:
-    """A progress bar on ``stream`` with the rate: redrawn in place on a terminal (at most
-    10 times a second), else a line every 5 s and at the end."""
+    """A progress bar on ``stream`` (default: sys.stderr) with the rate: redrawn in place on a
+    terminal (at most 10 times a second), else a line every 5 s and at the end."""
 
-    def __init__(self, total: int, stream: TextIO = sys.stderr, quiet: bool = False) -> None:
-        self.total, self.stream, self.quiet = total, stream, quiet
+    def __init__(self, total: int, stream: TextIO | None = None, quiet: bool = False) -> None:
+        self.total, self.quiet = total, quiet
+        self.stream = stream if stream is not None else sys.stderr
         self.done = self.failed = 0
         self.t0 = self._shown = time.perf_counter()
         self.tty = bool(getattr(stream, "isatty", lambda: False)())
