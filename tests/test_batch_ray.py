@@ -65,11 +65,16 @@ def test_bench_batch_table(capsys):
     verified, no structure built in the timed part, BLAS on one thread in every worker."""
     assert main(["bench", "--batch", "-n", "6"]) == 0
     out = capsys.readouterr().out
-    rows = [line.split("|")[1:-1] for line in out.splitlines() if re.match(r"\| \w", line)]
-    table = {(r[0].strip(), r[1].strip()): [c.strip() for c in r] for r in rows[1:]}
+    rows = [
+        [c.strip() for c in line.split("|")[1:-1]]
+        for line in out.splitlines()
+        if re.match(r"\| \w", line)
+    ]
+    table = {(r[0], r[1]): dict(zip(rows[0], r, strict=True)) for r in rows[1:]}
     assert set(table) == {("in-process", "1"), ("local", "1"), ("local", "2"), ("ray", "2")}
     for row in table.values():
-        assert row[2] == "6/6" and row[9] == "0" and row[10] == "1", row
-        assert float(row[3]) > 0
-    assert table[("local", "1")][4] == "1.00x"
+        assert row["verified"] == "6/6" and row["builds timed"] == "0", row
+        assert row["BLAS threads"] == "1" and float(row["postures/s"]) > 0, row
+        assert 0 < float(row["workers' CPU share"]) <= 1.05, row
+    assert table[("local", "1")]["speed-up"] == "1.00x"
     assert "load average" in out

@@ -5,7 +5,13 @@ Each configuration starts its workers, has each solve the family's warm-up probl
 structure built, like the first solve of ``posturegen bench``) and waits for all of them; then
 the n problems are timed. A row gives the warm rate (the n problems only) and the cold one (the
 workers' start and warm-up counted too), and how many structures were built during the timed
-part (0: every worker reused the one it built while warming up).
+part (0: every worker reused the one it built while warming up). On a machine shared with
+other work the rates say little alone: the workers' CPU share (their CPU time over workers x
+wall time; 1 when each had a core to itself) and the CPU per call say whether the workers
+waited for cores, and the dispatch CPU what this process spent per posture sending problems
+and receiving Results (on 2 cores, time taken from the workers). The rate over the CPU share
+estimates the rate the workers would reach with a core each (it ignores the dispatch CPU's
+competition for those cores): on a loaded machine, compare those.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from datetime import date
 from pathlib import Path
 
 from ..bench import FAMILIES
+from ..errors import InputError
 from ..solve import Result
 from .backends import open_backend
 from .jobs import BatchItem, Job, make_jobs
@@ -45,6 +52,9 @@ class ScalingRow:
     cold_rate: float  # n / (start_s + wall_s)
     median_call_ms: float
     p95_call_ms: float
+    median_cpu_ms: float  # the worker's CPU time in a call
+    cpu_share: float  # the workers' CPU time over workers x wall time (1: each had a core)
+    dispatch_cpu_ms: float  # this process's CPU time per posture, beyond solving
     builds: int  # structures built during the timed part
     blas_threads: int  # the most threads of any OpenBLAS in any worker (0: not seen)
     speedup: float = float("nan")  # rate / the 1-worker local rate
@@ -57,10 +67,14 @@ class ScalingRow:
             f"{self.verified}/{self.n}",
             f"{self.rate:.1f}",
             f"{self.speedup:.2f}x",
+            f"{self.rate / self.cpu_share:.1f}",
             f"{self.cold_rate:.1f}",
             f"{self.start_s:.1f}",
             f"{self.median_call_ms:.1f}",
             f"{self.p95_call_ms:.1f}",
+            f"{self.median_cpu_ms:.1f}",
+            f"{self.cpu_share:.2f}",
+            f"{self.dispatch_cpu_ms:.2f}",
             str(self.builds),
             str(self.blas_threads),
         ]
@@ -72,10 +86,14 @@ HEADER = (
     "verified",
     "postures/s",
     "speed-up",
+    "postures/s ÷ CPU share",
     "postures/s with start",
     "start [s]",
     "median call [ms]",
     "p95 call [ms]",
+    "CPU per call [ms]",
+    "workers' CPU share",
+    "dispatch CPU [ms/posture]",
     "builds timed",
     "BLAS threads",
 )
@@ -97,11 +115,14 @@ def _row(
     backend: str,
     workers: int,
     items: list[BatchItem],
-    start_s: float,
-    wall_s: float,
+    times: tuple[float, float, float],
     infos: list[WorkerInfo],
 ) -> ScalingRow:
+    """A row from the items and ``times``: start and wall time, this process's CPU time in
+    the timed part (the in-process row's solves subtracted) [s]."""
+    start_s, wall_s, cpu_s = times
     calls = [1e3 * i.call_time_s for i in items]
+    cpu = [i.cpu_time_s for i in items]
     n = len(items)
     return ScalingRow(
         backend=backend,
@@ -114,6 +135,9 @@ def _row(
         cold_rate=n / (start_s + wall_s),
         median_call_ms=statistics.median(calls),
         p95_call_ms=percentile(calls, 0.95),
+        median_cpu_ms=1e3 * statistics.median(cpu),
+        cpu_share=sum(cpu) / (workers * wall_s),
+        dispatch_cpu_ms=1e3 * (cpu_s - (sum(cpu) if backend == "in-process" else 0.0)) / n,
         builds=sum(isinstance(i.result, Result) and i.result.build_time_s > 0 for i in items),
         blas_threads=max((t for info in infos for _, t in info.blas_threads), default=0),
     )
@@ -123,10 +147,10 @@ def in_process(warm: Job, jobs: list[Job]) -> ScalingRow:
     """The n problems solved one after the other in this process (no pool)."""
     t0 = time.perf_counter()
     solve_job(warm)
-    t1 = time.perf_counter()
+    t1, cpu1 = time.perf_counter(), time.process_time()
     items = [solve_job(job) for job in jobs]
-    t2 = time.perf_counter()
-    return _row("in-process", 1, items, t1 - t0, t2 - t1, [worker_info()])
+    t2, cpu2 = time.perf_counter(), time.process_time()
+    return _row("in-process", 1, items, (t1 - t0, t2 - t1, cpu2 - cpu1), [worker_info()])
 
 
 def on_backend(backend: str, workers: int | None, warm: Job, jobs: list[Job]) -> ScalingRow:
@@ -135,13 +159,13 @@ def on_backend(backend: str, workers: int | None, warm: Job, jobs: list[Job]) ->
     pool = open_backend(backend, workers, warm=[warm])
     try:
         pool.ready()
-        t1 = time.perf_counter()
+        t1, cpu1 = time.perf_counter(), time.process_time()
         items = list(run_jobs(pool, jobs))
-        t2 = time.perf_counter()
+        t2, cpu2 = time.perf_counter(), time.process_time()
         infos = pool.ready()
     finally:
         pool.close()
-    return _row(backend, pool.workers, items, t1 - t0, t2 - t1, infos)
+    return _row(backend, pool.workers, items, (t1 - t0, t2 - t1, cpu2 - cpu1), infos)
 
 
 def batch_scaling(
@@ -163,7 +187,11 @@ def batch_scaling(
     if done is not None:
         done(rows[0])
     for backend, workers in plans:
-        rows.append(on_backend(backend, workers, warm, jobs))
+        try:
+            rows.append(on_backend(backend, workers, warm, jobs))
+        except InputError as exc:  # Ray cannot start here: the other rows stand
+            print(f"{backend}: no row: {exc}")
+            continue
         if done is not None:
             done(rows[-1])
     base = next(r.rate for r in rows if r.backend == "local" and r.workers == 1)

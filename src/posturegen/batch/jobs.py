@@ -72,8 +72,9 @@ class Job:
 @dataclass(frozen=True)
 class BatchItem:
     """The answer to one Job: ``call_time_s`` is the whole call in the worker (the problem
-    built, solved, re-checked, and diagnosed when asked) [s]; ``worker`` is ``host:pid``;
-    ``warnings`` are the warnings it raised, (category, message)."""
+    built, solved, re-checked, and diagnosed when asked) [s], ``cpu_time_s`` the worker's CPU
+    time in it [s] (below the call's when the machine's cores are busy elsewhere); ``worker``
+    is ``host:pid``; ``warnings`` are the warnings it raised, (category, message)."""
 
     index: int
     name: str
@@ -81,6 +82,7 @@ class BatchItem:
     call_time_s: float
     worker: str
     warnings: tuple[tuple[type[Warning], str], ...] = ()
+    cpu_time_s: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -58,13 +58,13 @@ def _answer(job: Job, diagnose: bool) -> Result | BatchError:
 
 def solve_job(job: Job, diagnose: bool = False) -> BatchItem:
     """One Job's BatchItem: its Result or BatchError, the whole call's time, the warnings."""
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", PosturegenWarning)
         answer = _answer(job, diagnose)
-    call = time.perf_counter() - t0
+    call, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     raised = tuple((w.category, str(w.message)) for w in caught)
-    return BatchItem(job.index, job.name, answer, call, worker_name(), raised)
+    return BatchItem(job.index, job.name, answer, call, worker_name(), raised, cpu)
 
 
 def run_chunk(jobs: Sequence[Job], diagnose: bool = False) -> list[BatchItem]:
