@@ -121,6 +121,15 @@ def test_a_crashed_worker_and_an_exception_fail_only_their_problem():
     assert results[1].status == "worker crashed" and results[1].name == "killer"
 
 
+def test_a_missing_file_is_its_problems_input_error(tmp_path):
+    """The worker reads a file: a missing one is that problem's one-line input error."""
+    missing = tmp_path / "missing.yaml"
+    results = pg.solve_many([missing, stand(TARGETS[0])], workers=1)
+    assert results[0].status == "input error" and results[0].name == "missing"
+    assert results[0].message == f"{missing}: no such file (give the path of an existing file)"
+    assert results[1].success
+
+
 def test_an_exception_in_a_worker_is_its_problems_error():
     """Any exception while solving becomes that problem's BatchError (status error), one line
     with the exception's type."""

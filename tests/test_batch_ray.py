@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import logging
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
 import ray
+import yaml
 
 import posturegen as pg
 from posturegen.batch import run_batch
@@ -26,20 +28,23 @@ def local_ray():
     ray.shutdown()
 
 
-def _inputs() -> list:
+def _inputs(folder: Path) -> list:
     bad = stand(TARGETS[0])
     bad["tasks"][0]["frame"] = "right_paw"
-    return [*(stand(t) for t in TARGETS), *talos_stand_reach(3, 7), stand(FAR, "far"), bad]
+    path = folder / "file.yaml"
+    path.write_text(yaml.safe_dump(stand(TARGETS[1])))
+    problems = [*(stand(t) for t in TARGETS), *talos_stand_reach(3, 7), path]
+    return [*problems, stand(FAR, "far"), bad]
 
 
-def test_ray_results_are_the_local_results():
-    """The same problems on Ray and on the local pool: the same success, status and q to
-    1e-9 (a failure and an input error among them)."""
+def test_ray_results_are_the_local_results(tmp_path):
+    """The same problems on Ray and on the local pool (dicts, Problem objects, a file): the
+    same success, status and q to 1e-9 (a failure and an input error among them)."""
     with pytest.warns(pg.ImplausibleValueWarning, match="far: "):
-        local = pg.solve_many(_inputs(), workers=2)
+        local = pg.solve_many(_inputs(tmp_path), workers=2)
     with pytest.warns(pg.ImplausibleValueWarning, match="far: "):
-        remote = pg.solve_many(_inputs(), backend="ray")
-    assert [r.success for r in local] == [True] * 8 + [False, False]
+        remote = pg.solve_many(_inputs(tmp_path), backend="ray")
+    assert [r.success for r in local] == [True] * 9 + [False, False]
     for a, b in zip(local, remote, strict=True):
         assert type(a) is type(b) and a.success == b.success and a.status == b.status
         if isinstance(a, pg.Result):

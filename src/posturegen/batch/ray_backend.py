@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from ..errors import InputError
-from .jobs import BatchItem, Job
+from .jobs import BatchItem, Job, read_file
 from .worker import WorkerInfo, run_chunk, warm, worker_info
 
 
@@ -96,9 +96,10 @@ class RayBackend:
         self._owner: dict[Any, int] = {}
 
     def submit(self, jobs: list[Job]) -> Any:
-        """Run a chunk on the actor with the fewest chunks in flight."""
+        """Run a chunk on the actor with the fewest chunks in flight (its files read here:
+        the actor may be on another machine)."""
         k = min(range(self.workers), key=self._load.__getitem__)
-        ref = self._actors[k].run.remote(jobs)
+        ref = self._actors[k].run.remote([read_file(job) for job in jobs])
         self._load[k] += 1
         self._owner[ref] = k
         return ref

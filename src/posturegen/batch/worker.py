@@ -23,7 +23,7 @@ from ..diagnose import diagnose as diagnose_result
 from ..errors import InputError, PosturegenError, PosturegenWarning
 from ..solve import Result, solve
 from ..spec import problem_from_dict
-from .jobs import ERROR, INPUT_ERROR, BatchError, BatchItem, Job
+from .jobs import ERROR, INPUT_ERROR, BatchError, BatchItem, Job, read_file
 
 
 def worker_name() -> str:
@@ -41,6 +41,7 @@ def _problem(job: Job) -> Any:
 
 def _answer(job: Job, diagnose: bool) -> Result | BatchError:
     """Solve one Job (and diagnose a failure when asked); an exception is its BatchError."""
+    job = read_file(job)
     if job.error:
         return BatchError(job.name, INPUT_ERROR, job.error)
     try:
