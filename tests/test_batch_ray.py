@@ -66,7 +66,8 @@ def test_ray_actors_reuse_their_structures_and_survive_a_crash():
 
 
 def test_bench_batch_table(capsys):
-    """posturegen bench --batch: a row in-process, local 1 and 2 workers, Ray; every problem
+    """posturegen bench --batch: a row in-process, local 1 and 2 workers, Ray (on the module's
+    instance: 2 CPUs); every problem
     verified, no structure built in the timed part, BLAS on one thread in every worker."""
     assert main(["bench", "--batch", "-n", "6"]) == 0
     out = capsys.readouterr().out
@@ -76,7 +77,8 @@ def test_bench_batch_table(capsys):
         if re.match(r"\| \w", line)
     ]
     table = {(r[0], r[1]): dict(zip(rows[0], r, strict=True)) for r in rows[1:]}
-    assert set(table) == {("in-process", "1"), ("local", "1"), ("local", "2"), ("ray", "2")}
+    rows_here = {("in-process", "1"), ("local", "1"), ("local", "2"), ("ray", "2")}
+    assert rows_here <= set(table) and len(table) <= 5  # and local x os.cpu_count()
     for row in table.values():
         assert row["verified"] == "6/6" and row["builds timed"] == "0", row
         assert row["BLAS threads"] == "1" and float(row["postures/s"]) > 0, row
