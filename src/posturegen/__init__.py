@@ -5,9 +5,11 @@ contacts (Brossette et al., IROS 2014).
     >>> problem = pg.load_problem("problem.yaml")
     >>> result = pg.solve(problem)
     >>> result.success, result.q, result.torques
+    >>> results = pg.solve_many(["a.yaml", "b.yaml"], workers=2)  # every core, input order
 """
 
 from . import _threads  # noqa: F401  (first: before numpy loads OpenBLAS)
+from .batch import BatchError, solve_many
 from .diagnose import diagnose
 from .errors import (
     ImplausibleValueWarning,
@@ -25,6 +27,7 @@ from .spec import load_problem, problem_from_dict
 from .verify import VerifyReport, verify_posture
 
 __all__ = [
+    "BatchError",
     "ImplausibleValueWarning",
     "InputError",
     "ModelError",
@@ -44,6 +47,7 @@ __all__ = [
     "load_robot",
     "problem_from_dict",
     "solve",
+    "solve_many",
     "verify_posture",
 ]
 __version__ = "0.1.0"
