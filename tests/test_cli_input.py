@@ -33,7 +33,7 @@ _DELETE = object()
 
 CASES = [
     ("contacts", _DELETE, "contacts: missing"),
-    ("bogus", 1, "problem.bogus: unknown field"),
+    ("bogus", 1, "problem.bogus: unknown key"),
     ("robot", "nao", "robot: unknown robot 'nao'"),
     ("contacts.0.robot_patch", "left_paw", "contacts[0].robot_patch"),
     ("contacts.0.surface", "ceiling", "contacts[0].surface"),

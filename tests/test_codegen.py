@@ -5,13 +5,20 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import inspect
+import json
 import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 
-from posturegen import codegen, problem_from_dict, solve
+from posturegen import _lifeline, codegen, problem_from_dict, solve
 from posturegen.cli import _demo_dir
 from posturegen.problem import _CACHE
 
@@ -169,3 +176,108 @@ def test_prune_keeps_the_most_recently_used_libraries(tmp_path, monkeypatch):
     monkeypatch.setattr(codegen, "MAX_CACHE_BYTES", 7 << 20)
     codegen._prune()
     assert sorted(p.stem for p in root.glob("*.so")) == ["mid", "new"]
+
+
+# ----------------------------------------------------------------- compilers die with us
+CHILD = """
+import json, os, sys, time, uuid
+from posturegen import _lifeline, codegen
+from posturegen.cli import _demo_dir
+from posturegen.spec import load_problem
+
+codegen.HOT_FLAGS = ("-O2",)  # the Hessian then compiles for minutes: it cannot end first
+compiled = load_problem(_demo_dir() / "stand-reach.yaml").compile()
+key = codegen.library_key(compiled.nlp, uuid.uuid4().hex)  # never built: a real compile
+codegen.build_in_background(key, compiled.solver, compiled.nlp)
+t0 = time.time()
+while time.time() - t0 < 120:  # until a compiler proper (cc1) runs in one of the groups
+    groups = _lifeline.running()
+    if any(comm == "cc1" for comm, _ in live_in(groups)):
+        break
+    time.sleep(0.02)
+print(json.dumps({"groups": groups, "live": live_in(groups)}), flush=True)
+if sys.argv[1] == "exit":
+    sys.exit(0)
+time.sleep(120)  # until the test sends a signal
+"""
+
+
+def _live_in(groups: list[int]) -> list[tuple[str, int]]:
+    """(command, pid) of the processes that are not zombies, in the process groups."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            text = stat.read_text()
+        except OSError:
+            continue
+        comm = text[text.index("(") + 1 : text.rindex(")")]
+        state, _, pgrp = text[text.rindex(")") + 2 :].split()[:3]
+        if state != "Z" and int(pgrp) in groups:
+            out.append((comm, int(stat.parent.name)))
+    return out
+
+
+def _child_build(how: str, tmp_path: Path) -> tuple[subprocess.Popen, dict]:
+    """A Python process that starts a background build of the stand-reach demo's program and
+    reports its compilers' process groups once a cc1 runs; it then exits (``exit``) or waits
+    for a signal."""
+    script = "from pathlib import Path\n" + inspect.getsource(_live_in) + CHILD
+    script = script.replace("def _live_in", "def live_in")
+    env = {**os.environ, "POSTUREGEN_CACHE": str(tmp_path)}
+    proc = subprocess.Popen(
+        [sys.executable, "-c", script, how], stdout=subprocess.PIPE, text=True, env=env
+    )
+    line = proc.stdout.readline()
+    if not line:
+        proc.stdout.close()
+        pytest.fail(f"the child printed nothing (exit {proc.wait()})")
+    report = json.loads(line)
+    if not any(comm == "cc1" for comm, _ in report["live"]):  # it was compiling
+        proc.kill()
+        proc.wait()
+        proc.stdout.close()
+        pytest.fail(f"no cc1 ran: {report}")
+    return proc, report
+
+
+def _gone(groups: list[int], timeout: float = 5.0) -> list[tuple[str, int]]:
+    """The processes still alive in the groups after at most ``timeout`` [s]."""
+    t0 = time.monotonic()
+    while (live := _live_in(groups)) and time.monotonic() - t0 < timeout:
+        time.sleep(0.05)
+    return live
+
+
+@needs_cc
+@pytest.mark.parametrize("how", ["exit", "SIGTERM", "SIGKILL"])
+def test_compilers_do_not_outlive_their_process(how, tmp_path):
+    proc, report = _child_build(how, tmp_path)
+    with proc:  # its pipe closed at the end
+        if how != "exit":
+            proc.send_signal(getattr(signal, how))
+        code = proc.wait(timeout=60)
+    assert code == (0 if how == "exit" else -getattr(signal, how))
+    assert _gone(report["groups"]) == []
+
+
+@needs_cc
+def test_a_build_past_its_timeout_is_killed(cache, monkeypatch):
+    compiled = _problem("off").compile()
+    key = codegen.library_key(compiled.nlp, "timeout test")
+    groups: list[int] = []
+    spawn = _lifeline.spawn
+
+    def recorded(cmd, log):
+        proc = spawn(cmd, log)
+        groups.append(proc.pid)
+        return proc
+
+    monkeypatch.setattr(_lifeline, "spawn", recorded)
+    monkeypatch.setattr(codegen, "COMPILE_TIMEOUT_S", 0.2)
+    monkeypatch.setattr(codegen, "_FAILED", set())
+    t0 = time.monotonic()
+    with pytest.warns(UserWarning, match="longer than 0.2 s"):
+        assert codegen.build(key, compiled.solver, compiled.nlp) is None
+    assert time.monotonic() - t0 < 5.0  # the Hessian alone compiles for seconds
+    assert groups and _gone(groups) == [] and _lifeline.running() == []
+    assert key in codegen._FAILED and not codegen.library_path(key).exists()

@@ -4,13 +4,17 @@ and point contacts, area maximization, thin patches and the next stance."""
 from __future__ import annotations
 
 import copy
+import dataclasses
 
+import casadi as ca
 import numpy as np
 import pytest
 
 from posturegen import problem_from_dict, solve
 from posturegen.contacts import patch_in_surface, polygon_in_surface
+from posturegen.cop import DEFAULT_COP_MARGIN
 from posturegen.errors import InputError
+from posturegen.friction import FrictionModel
 from posturegen.geometry import Ellipse, intersect, largest_inscribed_ellipse
 from posturegen.stance import next_problem
 from posturegen.verify import verify_posture
@@ -152,11 +156,16 @@ def test_next_stance_fixes_the_geometric_contact():
     assert fixed.n_points == inter.n  # forces at the intersection's vertices (sec. IV-E)
     np.testing.assert_allclose(fixed.area.vertices, inter.vertices, atol=1e-9)
     np.testing.assert_allclose(nxt.q_init, r.q)
+    # a geometric contact has no CoP margin: the fixed one takes the problem's
+    assert fixed.cop_margin == DEFAULT_COP_MARGIN
+    wider = dataclasses.replace(problem, cop_margin=0.02)
+    assert next_problem(wider, r, fix="right_sole").contacts[1].cop_margin == 0.02
     r2 = solve(nxt)
     assert r2.success, r2.message
     assert r2.iterations < 60
-    with pytest.raises(InputError, match="fix"):
-        next_problem(nxt, r2, fix="right_sole")  # already fixed
+    again = next_problem(nxt, r2, fix="right_sole")  # already fixed: it stays as it is
+    assert again.contacts[0] is fixed
+    np.testing.assert_allclose(again.q_init, r2.q)
     with pytest.raises(InputError, match="release"):
         next_problem(problem, r, fix="right_sole", release="nope")
 
@@ -242,3 +251,15 @@ def test_contact_options_are_validated(contact, field):
     with pytest.raises(InputError) as info:
         problem_from_dict(step_problem(contact))
     assert str(info.value).startswith(field)
+
+
+@pytest.mark.parametrize(
+    ("kind", "faces", "field"),
+    [("cones", 4, "friction.model"), ("Pyramid", 4, "friction.model"), ("pyramid", 2, "faces")],
+)
+def test_an_unknown_friction_model_is_an_input_error(kind, faces, field):
+    """FrictionModel("cones") used to build a pyramid silently."""
+    with pytest.raises(InputError) as info:
+        FrictionModel(kind, faces)
+    assert str(info.value).startswith(f"friction.{field.split('.')[-1]}")
+    assert FrictionModel("cone").constraints(ca.SX.sym("phi", 3), ca.SX(0.5)).shape == (1, 1)

@@ -43,10 +43,36 @@ FLOATING = {
 }
 
 
-@pytest.fixture(scope="module", params=["stand-reach", "floating"])
+# a support foot on a 2.5 cm rung: the scaled plane of sec. IV-F, whose CoP-margin row bounds
+# the smallest eigenvalue of BᵀB (posturegen.cop); the other foot fixed (polygon CoP rows)
+THIN = {
+    "robot": "talos",
+    "surfaces": [
+        FLOATING["surfaces"][0],
+        {
+            "name": "rung",
+            "position": [0.3, -0.1, 0.1],
+            "vertices": [[-0.0125, -0.3], [0.0125, -0.3], [0.0125, 0.3], [-0.0125, 0.3]],
+        },
+    ],
+    "contacts": [
+        {"robot_patch": "left_sole", "surface": "ground", "type": "fixed", "position": [0, 0.1]},
+        {"robot_patch": "right_sole", "surface": "rung", "type": "support", "points": 6},
+    ],
+    "options": {"cop_margin": 0.004},
+}
+
+
+@pytest.fixture(scope="module", params=["stand-reach", "floating", "thin"])
 def program(request):
     if request.param == "floating":
         problem = problem_from_dict(FLOATING)
+    elif request.param == "thin":
+        problem = problem_from_dict(THIN)
+        assert problem.contacts[1].scaled
+        assert {"contact.right_sole.cop", "contact.right_sole.cop_radius"} <= set(
+            problem.constraint_counts()
+        )
     else:
         problem = load_problem(_demo_dir() / "stand-reach.yaml")
     compiled = problem.compile()

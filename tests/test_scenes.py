@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from posturegen import scenes
-from posturegen.errors import InputError
+from posturegen.errors import ImplausibleValueWarning, InputError
 from posturegen.robot import load_robot, shipped_models_dir
 from posturegen.sequence import run_sequence, stage_problem_dict
 from posturegen.spec import problem_from_dict
@@ -82,9 +82,11 @@ def test_a_failed_stage_ends_the_sequence_and_says_so(tmp_path: Path) -> None:
     seq["stages"][1]["tasks"][0]["target"] = [2.5, -0.3, 0.8]  # out of reach
     seq["options"]["solver"] = {"max_iter": 60}
     seq["stages"].append({"name": "never", "contacts": scenes._keep("left_sole")})
-    report = run_sequence(seq, tmp_path)
+    with pytest.warns(ImplausibleValueWarning, match=r"tasks\[0\]\.target: .* farther than"):
+        report = run_sequence(seq, tmp_path)
     assert not report.success
     assert len(report.stages) == 2 and not report.stages[1].result.success
+    assert "beyond reach of wrist_right_ft_tool_link" in report.stages[1].diagnosis
     index = json.loads((tmp_path / "sequence.json").read_text())
     assert index["success"] is False and index["planned_stages"] == 3
     assert index["stages"][1]["success"] is False

@@ -16,6 +16,7 @@ from PIL import Image
 from posturegen import viz
 from posturegen.cli import main
 from posturegen.errors import InputError
+from posturegen.viz import scene, view3d
 
 CHROMIUM_FLAGS = [
     "--headless",
@@ -160,8 +161,8 @@ def test_camera_keeps_the_contacts_in_view(files):
     posture = viz.load_posture_any(files["brace"] / "posture.json")
     sv = viz.stance_view(posture)
     robot = sv.world_triangles()
-    content = viz._content(sv, robot, viz._force_scale([sv]))
-    cam = viz._choose_camera(sv, robot, viz._scene_mesh(sv)[0], content, viz.VIEW_ELEVATION)
+    content = scene.content_points(sv, robot, scene.force_scale([sv]))
+    cam = view3d.choose_camera(sv, robot, scene.scene_mesh(sv)[0], content, viz.VIEW_ELEVATION)
     wall = next(c for c in sv.contacts if c.surface == "wall")
     assert wall.T_ws[:3, 2] @ -cam.forward > 0
     frame = viz.Frame.fit(cam.screen(content), 800, 700)
@@ -225,6 +226,7 @@ def test_viewer_draws_in_headless_chromium(browser, files, tmp_path):
             assert page.evaluate("document.getElementById('error').hidden"), page.inner_text(
                 "#error"
             )
+            _assert_panel_beside_the_robot(page)
             first = Image.open(io.BytesIO(page.locator("canvas").screenshot()))
             # the slider moves to the second stance; a toggle hides the forces
             page.evaluate(
@@ -245,3 +247,48 @@ def test_viewer_draws_in_headless_chromium(browser, files, tmp_path):
     assert (a.std(axis=(0, 1)) > 5).all()
     assert "2/2" in label and "left hand on the wall" in label
     assert not np.array_equal(a, np.asarray(second.convert("RGB")))
+
+
+def _assert_panel_beside_the_robot(page) -> None:
+    """The control panel does not cover the canvas, and the robot (its mesh vertices projected
+    by the viewer's camera) is inside the canvas."""
+    panel, canvas, robot = page.evaluate(
+        "[document.getElementById('panel').getBoundingClientRect().toJSON(),"
+        " document.querySelector('canvas').getBoundingClientRect().toJSON(),"
+        " window.posturegenViewer.robotScreenBox()]"
+    )
+    apart = (
+        panel["right"] <= canvas["left"]
+        or canvas["right"] <= panel["left"]
+        or panel["bottom"] <= canvas["top"]
+        or canvas["bottom"] <= panel["top"]
+    )
+    assert apart, (panel, canvas)
+    viewport = page.viewport_size
+    assert (
+        canvas["right"] <= viewport["width"] + 0.5 and canvas["bottom"] <= viewport["height"] + 0.5
+    )
+    for a, b in (("left", "right"), ("top", "bottom")):
+        assert canvas[a] <= robot[a] < robot[b] <= canvas[b], (robot, canvas)
+
+
+@pytest.mark.parametrize("viewport", [(1400, 700), (600, 800), (700, 420)])
+def test_viewer_panel_is_beside_the_robot(browser, files, tmp_path, viewport):
+    # wide, narrow (the panel above the view) and small windows
+    chromium, sync_playwright = browser
+    html = viz.write_html(files["demo"], tmp_path / "demo.html")
+    with sync_playwright() as p:
+        context = p.chromium.launch_persistent_context(
+            str(tmp_path / "profile"),
+            executable_path=chromium,
+            args=CHROMIUM_FLAGS,
+            viewport={"width": viewport[0], "height": viewport[1]},
+        )
+        try:
+            context.set_offline(True)
+            page = context.new_page()
+            page.goto(html.as_uri())
+            page.wait_for_function("window.posturegenViewer && window.posturegenViewer.ready")
+            _assert_panel_beside_the_robot(page)
+        finally:
+            context.close()

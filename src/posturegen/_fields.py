@@ -10,6 +10,8 @@ import numpy as np
 import pinocchio as pin
 
 from .errors import InputError
+from .hints import did_you_mean
+from .plausible import check_angle, check_angles
 
 
 def require_mapping(value: Any, field: str) -> Mapping[str, Any]:
@@ -24,17 +26,21 @@ def require_mapping(value: Any, field: str) -> Mapping[str, Any]:
 def check_keys(
     value: Mapping[str, Any], field: str, required: Iterable[str], optional: Iterable[str]
 ) -> None:
-    """Every required key present, no unknown key."""
+    """Every required key present, no unknown key; an unknown key close to an allowed one is
+    reported first, as misspelt (``robot_pach: unknown key, did you mean robot_patch?``)."""
     required = list(required)
     allowed = set(required) | set(optional)
+    unknown = [key for key in value if key not in allowed]
+    listed = f"allowed keys: {', '.join(sorted(allowed))}"
+    for key in unknown:
+        hint = did_you_mean(str(key), allowed)
+        if hint:
+            raise InputError(f"{field}.{key}", f"unknown key, {hint}", listed)
     for key in required:
         if key not in value:
             raise InputError(f"{field}.{key}", "missing", f"add '{key}' to {field}")
-    for key in value:
-        if key not in allowed:
-            raise InputError(
-                f"{field}.{key}", "unknown field", f"allowed fields: {', '.join(sorted(allowed))}"
-            )
+    for key in unknown:
+        raise InputError(f"{field}.{key}", "unknown key", listed)
 
 
 def number(
@@ -50,6 +56,13 @@ def number(
         raise InputError(field, f"must be positive, got {x}", "write a number > 0")
     if minimum is not None and x < minimum:
         raise InputError(field, f"must be >= {minimum}, got {x}", f"write a number >= {minimum}")
+    return x
+
+
+def angle(value: Any, field: str) -> float:
+    """A finite angle [rad]; beyond a turn it is most likely degrees: a warning."""
+    x = number(value, field)
+    check_angle(x, field)
     return x
 
 
@@ -86,4 +99,5 @@ def placement(position: Any, rpy: Any, field: str) -> pin.SE3:
     """SE3 from a position (3,) [m] and roll-pitch-yaw angles (3,) [rad]."""
     p = vector(position, 3, f"{field}.position")
     r = vector(rpy, 3, f"{field}.rpy")
+    check_angles(r, f"{field}.rpy")
     return pin.SE3(pin.rpy.rpyToMatrix(*r), p)

@@ -11,11 +11,20 @@ sphere pairs within reach, all about as close.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
-from .collision import CollisionOptions, EnvBox, box_distances
+from .collision import (
+    CollisionOptions,
+    EnvBox,
+    box_distances,
+    env_boxes,
+    excluded_joint_ids,
+    proxy_model,
+)
+from .kinematics import scratch_data
 from .proxies import ProxyModel, closest
 
 # the closest sphere pairs of each pair of links, and spheres of each link near each box, that
@@ -63,6 +72,25 @@ class ActiveSet:
     data: pin.Data
     self_pairs: set[tuple[int, int]] = field(default_factory=set)
     env_pairs: set[tuple[int, int]] = field(default_factory=set)
+
+    @classmethod
+    def of(cls, problem: Any) -> ActiveSet:
+        """An empty active set for ``problem`` (its collision options set): its candidate
+        self pairs (those the pair rule leaves checked, minus the user's exclusions; none
+        without self-collision) and its boxes."""
+        opts = problem.collision_options
+        robot = problem.robot
+        pm = proxy_model(robot)
+        links = np.zeros(0, dtype=int)
+        if opts.self_collision:
+            links = pm.links_of(frozenset(excluded_joint_ids(robot, opts)))
+        model = robot.model
+        return cls(pm, links, env_boxes(problem), opts, model, scratch_data(model))
+
+    @property
+    def n_env_candidates(self) -> int:
+        """Sphere-box pairs that are avoided."""
+        return int(self.allowed.sum())
 
     def __post_init__(self) -> None:
         self.allowed = np.ones((len(self.pm.spheres), len(self.boxes)), dtype=bool)
@@ -118,3 +146,11 @@ class ActiveSet:
         group = group[order]
         keep = order[np.arange(len(group)) - np.searchsorted(group, group) < ENV_PER_LINK]
         return {(int(i), int(k)) for i, k in zip(sphere[keep], box[keep], strict=True)}
+
+
+def box_label(box: EnvBox) -> str:
+    """An environment box as the user named it: ``obstacle 'wall'``, or ``the solid under
+    surface 'ground'``."""
+    if box.name.startswith("surface:"):
+        return f"the solid under surface '{box.name[len('surface:') :]}'"
+    return f"obstacle '{box.name}'"

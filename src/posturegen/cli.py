@@ -1,4 +1,4 @@
-"""Command line: ``posturegen solve | inspect | verify | demo | bench | render | view``.
+"""Command line: ``posturegen solve | batch | inspect | verify | demo | bench | render | view``.
 
 Exit codes: 0 verified success; 1 no posture found (the file is still written, success false);
 2 invalid input (one line on stderr naming the field and the fix).
@@ -8,12 +8,19 @@ from __future__ import annotations
 
 import argparse
 import importlib.resources
+import importlib.util
 import json
 import sys
+import warnings
 from collections.abc import Sequence
+from dataclasses import asdict
 from pathlib import Path
 
-from .errors import PosturegenError
+from .batch.bench import DEFAULT_FAMILY, ScalingRow, batch_scaling, machine_line, table
+from .batch.command import batch_to_dir
+from .batch.sources import read_sources
+from .errors import PosturegenError, PosturegenWarning
+from .hints import with_hint
 
 EXIT_OK, EXIT_NOT_FOUND, EXIT_INPUT = 0, 1, 2
 
@@ -28,18 +35,20 @@ def demo_names() -> list[str]:
 
 
 def _solve_to(problem_path: Path, out: Path, quiet: bool = False, png: str | None = None) -> int:
-    from .solve import solve
+    from .diagnose import solve_diagnosed
     from .spec import load_problem
 
-    problem = load_problem(problem_path)
-    result = solve(problem)
+    result = solve_diagnosed(load_problem(problem_path))
     path = result.write(out / "posture.json")
+    effort = (
+        f"IPOPT {result.status}, {result.iterations} iterations, "
+        f"{1e3 * result.solve_time_s:.1f} ms (+{1e3 * result.build_time_s:.0f} ms build)"
+    )
+    if not result.success:  # one line on stderr: what blocks it
+        print(f"posturegen: no posture: {result.diagnosis} ({effort})", file=sys.stderr)
+    elif not quiet:
+        print(f"verified posture: {effort}")
     if not quiet:
-        state = "verified posture" if result.success else "NO POSTURE"
-        print(
-            f"{state}: {result.message}; IPOPT {result.status}, {result.iterations} iterations, "
-            f"{1e3 * result.solve_time_s:.1f} ms (+{1e3 * result.build_time_s:.0f} ms build)"
-        )
         print(f"wrote {path}")
     if png is not None:
         from .viz import render_png
@@ -55,11 +64,24 @@ def cmd_solve(args: argparse.Namespace) -> int:
     return _solve_to(Path(args.problem), Path(args.out), args.quiet, args.png)
 
 
+def cmd_batch(args: argparse.Namespace) -> int:
+    """posturegen batch PROBLEMS... --out DIR [--workers N] [--backend local|ray]"""
+    problems = read_sources(args.problems, sys.stdin)
+    out = Path(args.out)
+    summary = batch_to_dir(problems, out, args.backend, args.workers, args.address, args.quiet)
+    for line in summary.lines():
+        print(line)
+    if not args.quiet:
+        print(f"wrote {out / 'batch.json'} and the posture files")
+    return EXIT_OK if summary.verified == summary.n else EXIT_NOT_FOUND
+
+
 def cmd_inspect(args: argparse.Namespace) -> int:
     """posturegen inspect PROBLEM.yaml: the program's variables, constraints and costs."""
+    from .inspection import describe
     from .spec import load_problem
 
-    print(load_problem(Path(args.problem)).summary())
+    print(describe(load_problem(Path(args.problem))))
     return EXIT_OK
 
 
@@ -89,7 +111,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         return EXIT_OK
     known = sorted(set(names) | set(SCENES))
     if args.name not in known:
-        raise PosturegenError(f"demo: unknown demo '{args.name}' (known: {', '.join(known)})")
+        hint = with_hint(args.name, known, f"known: {', '.join(known)}")
+        raise PosturegenError(f"demo: unknown demo '{args.name}' ({hint})")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.name in names and args.robot is None:
@@ -105,7 +128,8 @@ def cmd_climb(args: argparse.Namespace) -> int:
 
     climbs = [n for n, info in SCENES.items() if info.climb_steps is not None]
     if args.scene not in climbs:
-        raise PosturegenError(f"climb: unknown climb '{args.scene}' (known: {', '.join(climbs)})")
+        hint = with_hint(args.scene, climbs, f"known: {', '.join(climbs)}")
+        raise PosturegenError(f"climb: unknown climb '{args.scene}' ({hint})")
     steps = args.steps if args.steps is not None else SCENES[args.scene].climb_steps
     if steps is None or steps < 1:
         raise PosturegenError("--steps: expected an integer >= 1 (steps of each foot)")
@@ -165,12 +189,10 @@ def _run_sequence(seq: dict, out: Path, quiet: bool, png: str | None, final: boo
             print(f"{report.name} on {robot}: every stage verified")
         return EXIT_OK
     print(
-        f"posturegen: {report.name} on {robot}: no verified posture at stage "
-        f"'{last.name}' ({last.result.message}); nothing after it was solved",
+        f"posturegen: {report.name} on {robot}: no posture at stage '{last.name}': "
+        f"{last.diagnosis or last.result.message}; nothing after it was solved",
         file=sys.stderr,
     )
-    if last.diagnosis:
-        print(f"posturegen: diagnosis: {last.diagnosis}", file=sys.stderr)
     return EXIT_NOT_FOUND
 
 
@@ -214,15 +236,17 @@ def _add_png_option(p: argparse.ArgumentParser) -> None:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    """posturegen bench [--json FILE]"""
+    """posturegen bench [--json FILE] | posturegen bench --batch"""
     from .bench import FAMILIES, FamilyReport, comparison_lines, run_families
 
     names = args.family or list(FAMILIES)
     for name in names:
         if name not in FAMILIES:
-            raise PosturegenError(
-                f"--family: unknown family '{name}' (known: {', '.join(FAMILIES)})"
-            )
+            hint = with_hint(name, FAMILIES, f"known: {', '.join(FAMILIES)}")
+            raise PosturegenError(f"--family: unknown family '{name}' ({hint})")
+    if args.batch:
+        return _bench_batch(args)
+    args.n = 100 if args.n is None else args.n
 
     def show(rep: FamilyReport) -> None:
         print(rep.line(), flush=True)
@@ -233,11 +257,62 @@ def cmd_bench(args: argparse.Namespace) -> int:
     for line in comparison_lines(reports):
         print(line)
     if args.json:
-        from dataclasses import asdict
-
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps([asdict(r) for r in reports], indent=1))
     return EXIT_OK
+
+
+def _bench_batch(args: argparse.Namespace) -> int:
+    """posturegen bench --batch: postures/s on 1..N local workers and on Ray."""
+    if args.family and len(args.family) > 1:
+        raise PosturegenError("--family: --batch runs one family (give --family once)")
+    family = args.family[0] if args.family else DEFAULT_FAMILY
+    n = 500 if args.n is None else args.n
+    ray = importlib.util.find_spec("ray") is not None
+    print(f"batch scaling, {family}, {n} problems, seed {args.seed}: {machine_line()}")
+    if not ray:
+        print("ray: not installed, no Ray row (pip install 'posturegen[ray]')")
+
+    def show(row: ScalingRow) -> None:
+        print(f"  {row.backend} x{row.workers}: {row.rate:.1f} postures/s", flush=True)
+
+    rows = batch_scaling(family, n, args.seed, args.jit, ray, done=show)
+    for line in table(rows):
+        print(line)
+    print(f"after: {machine_line()}")
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps([asdict(r) for r in rows], indent=1))
+    return EXIT_OK
+
+
+def _add_batch_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("batch", help="solve many problems on every core or a Ray cluster")
+    p.add_argument("problems", nargs="+", help="problem files, folders of them, - for stdin")
+    p.add_argument("--out", required=True)
+    p.add_argument("--workers", type=int, help="processes (default: every core or Ray CPU)")
+    p.add_argument("--backend", choices=["local", "ray"], default="local")
+    p.add_argument("--address", help="Ray cluster: auto, or ray://HOST:10001 (default: local)")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_batch)
+
+
+def _add_bench_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("bench", help="run the seeded benchmark families")
+    p.add_argument("--json", help="also write the reports to this JSON file")
+    p.add_argument("--family", action="append", help="run only this family (repeatable)")
+    p.add_argument(
+        "-n", type=int, help="problems per family (default 100; --batch: 500 in each row)"
+    )
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--jit", action="store_true", help="compile the solvers to C first (needs gcc)")
+    p.add_argument(
+        "--batch",
+        action="store_true",
+        help="postures/s of one family (default talos-stand-reach) in-process, on 1..N local "
+        "workers and on Ray",
+    )
+    p.set_defaults(func=cmd_bench)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -250,6 +325,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true")
     _add_png_option(p)
     p.set_defaults(func=cmd_solve)
+    _add_batch_parser(sub)
     p = sub.add_parser("inspect", help="print a problem's variables, constraints and costs")
     p.add_argument("problem")
     p.set_defaults(func=cmd_inspect)
@@ -272,13 +348,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true")
     _add_png_option(p)
     p.set_defaults(func=cmd_climb)
-    p = sub.add_parser("bench", help="run the seeded benchmark families")
-    p.add_argument("--json", help="also write the reports to this JSON file")
-    p.add_argument("--family", action="append", help="run only this family (repeatable)")
-    p.add_argument("-n", type=int, default=100, help="problems per family (default 100)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--jit", action="store_true", help="compile the solvers to C first (needs gcc)")
-    p.set_defaults(func=cmd_bench)
+    _add_bench_parser(sub)
     meshes = {"choices": ["visual", "collision"], "default": "visual", "help": "robot meshes"}
     p = sub.add_parser("render", help="draw a posture file to a PNG (paper-style figure)")
     p.add_argument("posture")
@@ -304,12 +374,31 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _show_warning(
+    message: Warning | str,
+    category: type[Warning],
+    filename: str,
+    lineno: int,
+    file: object = None,
+    line: str | None = None,
+) -> None:
+    """posturegen's warnings as one line on stderr (``posturegen: warning: ...``), others as
+    Python shows them."""
+    if issubclass(category, PosturegenWarning):
+        print(f"posturegen: warning: {message}", file=sys.stderr)
+    else:
+        sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``posturegen`` console script."""
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args))
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", PosturegenWarning)
+            warnings.showwarning = _show_warning
+            return int(args.func(args))
     except PosturegenError as exc:
         print(f"posturegen: error: {exc}", file=sys.stderr)
         return EXIT_INPUT

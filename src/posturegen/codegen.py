@@ -27,6 +27,11 @@ instead of 14-22 s, spent in register allocation; ``-O2`` took 200 s for no gain
 functions IPOPT never calls in a solve but ``nlpsol`` requires (the program itself and its
 gradient, for the multipliers of the parameters) at ``-O0``. The sources compile in parallel,
 the largest first.
+
+The compilers never outlive the process that started them (:mod:`posturegen._lifeline`): each
+runs in its own process group, killed at exit, and by a watchdog when the process ends any
+other way (SIGTERM, SIGKILL); a build that takes longer than ``COMPILE_TIMEOUT_S`` is killed
+and counts as failed (the virtual machine solves on).
 """
 
 from __future__ import annotations
@@ -36,7 +41,6 @@ import hashlib
 import os
 import platform
 import shutil
-import signal
 import subprocess
 import tempfile
 import threading
@@ -48,6 +52,8 @@ from typing import Any
 
 import casadi as ca
 
+from . import _lifeline
+
 CODEGEN_VERSION = 1
 MODES = ("auto", "sync", "off")
 # the functions IPOPT calls at every iteration, and those nlpsol needs to exist
@@ -57,6 +63,7 @@ HOT_FLAGS = ("-Og", "-ffp-contract=off")
 COLD_FLAGS = ("-O0",)
 MAX_CACHE_BYTES = 256 << 20  # least recently used libraries beyond this are deleted (1-4 MB each)
 AUTO_BUILD_AFTER_USES = 2  # mode auto: compile when a structure is solved this many times
+COMPILE_TIMEOUT_S = 600.0  # a library's build (compilation and link) that takes longer fails
 
 
 def cache_dir() -> Path:
@@ -121,7 +128,6 @@ _QUEUE: list[tuple[str, Path, list[tuple[Path, bool]], float]] = []  # backgroun
 _PENDING: set[str] = set()  # keys queued or compiling
 _WORKER: threading.Thread | None = None
 _FAILED: set[str] = set()
-_PROCESSES: set[subprocess.Popen] = set()
 _TMPDIRS: set[Path] = set()
 _EXITING = False
 
@@ -235,36 +241,27 @@ def _compile(
 ) -> BuildInfo | None:
     """Compile the sources in parallel (one job per core; in the background one core is left
     to the solver), link, and move the library into the cache atomically (concurrent builders
-    of one key write the same bytes)."""
+    of one key write the same bytes). A build that takes longer than COMPILE_TIMEOUT_S fails:
+    its compilers are killed."""
     cc = compiler()
     t0 = time.perf_counter()
-    objects: list[Path] = []
-    queue = list(sources)
-    running: list[tuple[subprocess.Popen, Path]] = []
     try:
         if cc is None:
             raise RuntimeError("no C compiler")
+        deadline = t0 + COMPILE_TIMEOUT_S
         jobs = max(1, min((os.cpu_count() or 1) - background, 4))
         # in the background, at a lower priority than the solves
         nice = ["nice", "-n", "10"] if background and shutil.which("nice") else []
-        while queue or running:
-            while queue and len(running) < jobs:
-                src, hot = queue.pop(0)
-                obj = src.with_suffix(".o")
-                flags = HOT_FLAGS if hot else COLD_FLAGS
-                cmd = [*nice, cc, "-c", "-fPIC", "-w", *flags, str(src), "-o", str(obj)]
-                running.append((_spawn(cmd, src.with_suffix(".log")), src))
-                objects.append(obj)
-            done = [job for job in running if job[0].poll() is not None]
-            if not done:
-                time.sleep(0.02)
-            for proc, src in done:  # a free core takes the next source at once
-                running.remove((proc, src))
-                _check(proc, src.name, src.with_suffix(".log"))
+        commands = []
+        for src, hot in sources:
+            flags = HOT_FLAGS if hot else COLD_FLAGS
+            obj = str(src.with_suffix(".o"))
+            cmd = [*nice, cc, "-c", "-fPIC", "-w", *flags, str(src), "-o", obj]
+            commands.append((cmd, src.name, src.with_suffix(".log")))
+        _run(commands, jobs, deadline)
         out = tmp / "lib.so"
-        link = _spawn([cc, "-shared", *map(str, objects), "-o", str(out)], tmp / "link.log")
-        link.wait()
-        _check(link, "link", tmp / "link.log")
+        objects = [str(src.with_suffix(".o")) for src, _ in sources]
+        _run([([cc, "-shared", *objects, "-o", str(out)], "link", tmp / "link.log")], 1, deadline)
         size = out.stat().st_size
         os.replace(out, library_path(key))
         info = BuildInfo(key, generate_s, time.perf_counter() - t0, size, background)
@@ -279,37 +276,39 @@ def _compile(
             )
         return None
     finally:
-        for proc, _ in running:  # after a failure: stop the other jobs
-            _kill(proc)
-            proc.wait()
         shutil.rmtree(tmp, ignore_errors=True)
         with _LOCK:
             _TMPDIRS.discard(tmp)
 
 
-def _spawn(cmd: list[str], log: Path) -> subprocess.Popen:
-    """The compiler driver in its own process group (so that :func:`_kill` also stops the
-    compiler proper, cc1, it runs), its messages in ``log``."""
-    with open(log, "wb") as err:
-        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err, start_new_session=True)
-    with _LOCK:
-        _PROCESSES.add(proc)
-    return proc
-
-
-def _kill(proc: subprocess.Popen) -> None:
-    """Stop a compiler started by :func:`_spawn` and its children."""
-    if proc.poll() is None:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except OSError:
-            proc.kill()
+def _run(commands: list[tuple[list[str], str, Path]], jobs: int, deadline: float) -> None:
+    """Run ``(command, what, log)`` jobs, ``jobs`` at a time (a free core takes the next one
+    at once); raise on the first failure or at the ``deadline`` (perf_counter) [s], after
+    killing the jobs still running."""
+    queue = list(commands)
+    running: list[tuple[subprocess.Popen, str, Path]] = []
+    try:
+        while queue or running:
+            while queue and len(running) < jobs:
+                if _EXITING:  # the process is ending: start no other compiler
+                    raise RuntimeError("the process is exiting")
+                cmd, what, log = queue.pop(0)
+                running.append((_lifeline.spawn(cmd, log), what, log))
+            done = [job for job in running if _lifeline.finished(job[0])]
+            for job in done:
+                running.remove(job)
+                _check(*job)
+            if not done:
+                if time.perf_counter() > deadline:
+                    raise RuntimeError(f"compilation took longer than {COMPILE_TIMEOUT_S:g} s")
+                time.sleep(0.02)
+    finally:
+        for proc, _, _ in running:  # after a failure or the deadline: stop the other jobs
+            _lifeline.kill(proc)
 
 
 def _check(proc: subprocess.Popen, what: str, log: Path) -> None:
-    """Forget a finished compiler; raise with its messages when it failed."""
-    with _LOCK:
-        _PROCESSES.discard(proc)
+    """Raise with a finished compiler's messages when it failed."""
     if proc.returncode != 0:
         msg = log.read_text(errors="replace")[:500] if log.is_file() else ""
         raise RuntimeError(f"{what}: exit {proc.returncode}: {msg}")
@@ -335,9 +334,8 @@ def _cancel() -> None:
     global _EXITING
     _EXITING = True
     with _LOCK:
-        procs, tmps = list(_PROCESSES), list(_TMPDIRS)
+        tmps = list(_TMPDIRS)
         _QUEUE.clear()
-    for proc in procs:
-        _kill(proc)
+    _lifeline.kill_all()
     for tmp in tmps:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -8,6 +8,7 @@ position (x, y) and yaw ψ on the surface is ``T_s_c = Trans(x, y, 0)·Rz(ψ)·R
 
 from __future__ import annotations
 
+import dataclasses
 from abc import abstractmethod
 from dataclasses import dataclass, field
 from typing import Any
@@ -16,8 +17,20 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
+from .cop import (
+    DEFAULT_COP_MARGIN,
+    check_polygon_margin,
+    declare_ellipse_cop,
+    declare_polygon_cop,
+    kappa_guess,
+    polygon_depths,
+)
+from .ellipse_options import EllipseOptions, thin_scaling
 from .errors import InputError
+from .forces import declare_forces, force_guess, forces_dict
+from .friction import FrictionModel
 from .geometry import ConvexPolygon, intersect
+from .min_ellipse import default_min_radii
 from .problem import BuildContext, Problem, Term
 from .robot import Patch
 from .scene import Surface
@@ -37,27 +50,6 @@ def polygon_in_surface(patch: Patch, T_surface_patch: pin.SE3) -> ConvexPolygon:
         + T_surface_patch.translation
     )
     return ConvexPolygon(pts[:, :2])
-
-
-@dataclass(frozen=True)
-class FrictionModel:
-    """Friction cone |f_t| <= μ f_n, exactly (``cone``) or as an inscribed pyramid with
-    ``faces`` faces: (cos θ_k, sin θ_k)·f_t <= μ cos(π/faces) f_n."""
-
-    kind: str = "pyramid"  # "pyramid" | "cone"
-    faces: int = 4
-
-    def constraints(self, phi: ca.SX, mu: ca.SX) -> ca.SX:
-        """Rows that must be <= 0 for local force φ = (f_t, f_n) (3,)."""
-        if self.kind == "cone":
-            return ca.vertcat(phi[0] ** 2 + phi[1] ** 2 - mu**2 * phi[2] ** 2)
-        rows = []
-        for k in range(self.faces):
-            th = 2 * np.pi * k / self.faces
-            rows.append(
-                np.cos(th) * phi[0] + np.sin(th) * phi[1] - mu * np.cos(np.pi / self.faces) * phi[2]
-            )
-        return ca.vertcat(*rows)
 
 
 class Contact(Term):
@@ -94,42 +86,6 @@ class Contact(Term):
         }
 
 
-def declare_forces(
-    ctx: BuildContext,
-    pre: str,
-    joint_id: int,
-    points_world: list[ca.SX],
-    friction: FrictionModel,
-    Rs: ca.SX,
-) -> None:
-    """Force variables at world points attached to joint ``joint_id``: f = W·R_s·φ with φ in
-    the surface frame (φ_n >= 0), W the robot's weight, and the friction model on each φ.
-
-    Declares ``{pre}.forces`` (3k,) and the parameter ``{pre}.mu``; ``Rs`` is R_world_surface; adds
-    the forces to the equilibrium and the outputs ``{pre}.points`` and ``{pre}.forces``."""
-    nlp, k = ctx.nlp, len(points_world)
-    phi = nlp.variable(f"{pre}.forces", 3 * k, np.tile([-np.inf, -np.inf, 0.0], k), np.inf)
-    mu = nlp.parameter(f"{pre}.mu", 1)
-    W = ctx.robot.weight
-    fric, f_world = [], []
-    for i, pw in enumerate(points_world):
-        phi_i = phi[3 * i : 3 * i + 3]
-        fric.append(friction.constraints(phi_i, mu))
-        fw = W * (Rs @ phi_i)
-        ctx.force_points.append((joint_id, pw, fw))
-        f_world.append(fw)
-    nlp.constrain(f"{pre}.friction", ca.vertcat(*fric), -np.inf, 0.0)
-    nlp.output(f"{pre}.points", ca.horzcat(*points_world))
-    nlp.output(f"{pre}.forces", ca.horzcat(*f_world))
-
-
-def force_guess(problem: Problem, n_points: int) -> np.ndarray:
-    """Initial φ (3·n_points,): the weight shared evenly over every force point, along the
-    normal."""
-    total = sum(c.force_points_count() for c in problem.contacts) or 1
-    return np.tile([0.0, 0.0, 1.0 / total], n_points)
-
-
 def declare_patch_frame(ctx: BuildContext, patch: Patch) -> tuple[ca.SX, ca.SX]:
     """(R_world_patch (3,3), p_world_patch (3,)) as expressions of q."""
     R_j, p_j = ctx.state.R[patch.joint_id], ctx.state.p[patch.joint_id]
@@ -142,9 +98,11 @@ class FixedContact(Contact):
     """A robot patch at a given pose on a surface, bearing forces at the vertices of the
     intersection of the two polygons (paper sec. IV-E).
 
-    Pose: ``R_tᵀ(p_c - p_t) = 0`` and the three skew components of ``R_tᵀR_c`` vanish, with
-    ``T_t = T_world_surface·T_surface_patch`` the target. Forces: one f = W·R_s·φ per point,
-    φ_n >= 0 and the friction model on φ, W the robot's weight.
+    Pose: ``R_tᵀ(p_c - p_t) = 0``; E = R_tᵀR_c has E[2,0] = E[2,1] = E[1,0] = 0 and
+    trace(E) >= 0 (the equalities alone also admit the rotations by π about x, y or z, of
+    trace -1), with ``T_t = T_world_surface·T_surface_patch`` the target. Forces: one
+    f = W·R_s·φ per point, φ_n >= 0 and the friction model on φ, W the robot's weight; the
+    centre of pressure ``cop_margin`` [m] inside the intersection (:mod:`posturegen.cop`).
     """
 
     name: str
@@ -155,6 +113,7 @@ class FixedContact(Contact):
     mu: float
     friction: FrictionModel = field(default_factory=FrictionModel)
     type: str = "fixed"
+    cop_margin: float = field(default=DEFAULT_COP_MARGIN, kw_only=True)  # [m]
 
     def __post_init__(self) -> None:
         self.T_surface_patch = patch_in_surface(self.position, self.yaw)
@@ -167,6 +126,7 @@ class FixedContact(Contact):
                 "move the contact's position inside the surface polygon",
             )
         self.area = area  # intersection polygon in the surface plane
+        check_polygon_margin(area, self.cop_margin, self.patch.name, self.surface.name)
         # force points: the intersection's vertices, in the parent joint frame of the patch
         pts_s = np.column_stack([area.vertices, np.zeros(area.n)])
         T_joint_surface = self.patch.T_joint_patch * self.T_surface_patch.inverse()
@@ -184,7 +144,8 @@ class FixedContact(Contact):
         return self.n_points
 
     def key(self) -> tuple[Any, ...]:
-        return ("fixed", self.name, self.patch.name, self.n_points, self.friction)
+        cop = self.cop_margin > 0
+        return ("fixed", self.name, self.patch.name, self.n_points, self.friction, cop)
 
     def declare(self, ctx: BuildContext) -> None:
         nlp, k = ctx.nlp, self.n_points
@@ -195,21 +156,29 @@ class FixedContact(Contact):
         E = Rt.T @ R_c
         nlp.constrain(f"{pre}.position", Rt.T @ (p_c - pt), 0.0, 0.0)
         nlp.constrain(f"{pre}.orientation", ca.vertcat(E[2, 0], E[2, 1], E[1, 0]), 0.0, 0.0)
+        # those rows also hold for E = Rz(π), Rx(π), Ry(π) (trace -1): keep the trace >= 0
+        nlp.constrain(f"{pre}.orientation_branch", ca.trace(E), 0.0, np.inf)
         pts = ca.reshape(nlp.parameter(f"{pre}.points_joint", 3 * k), 3, k)
         R_j, p_j = ctx.state.R[self.patch.joint_id], ctx.state.p[self.patch.joint_id]
         points = [p_j + R_j @ pts[:, i] for i in range(k)]
         Rs = ca.reshape(nlp.parameter(f"{pre}.R_surface", 9), 3, 3)
-        declare_forces(ctx, pre, self.patch.joint_id, points, self.friction, Rs)
+        phi_n = declare_forces(ctx, pre, self.patch.joint_id, points, self.friction, Rs)
+        if self.cop_margin > 0:
+            declare_polygon_cop(nlp, pre, phi_n, self.area.n)
 
     def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
         pre = f"contact.{self.name}"
-        return {
+        out = {
             f"{pre}.R_target": self.T_world_target.rotation,
             f"{pre}.p_target": self.T_world_target.translation,
             f"{pre}.R_surface": self.surface.T_world_surface.rotation,
             f"{pre}.mu": np.array([self.mu]),
             f"{pre}.points_joint": self.points_joint.T,
         }
+        if self.cop_margin > 0:
+            out[f"{pre}.cop_depths"] = polygon_depths(self.area, self.area.vertices)
+            out[f"{pre}.cop_margin"] = np.array([self.cop_margin])
+        return out
 
     def initial_guess(self, problem: Problem) -> dict[str, np.ndarray]:
         return {f"contact.{self.name}.forces": force_guess(problem, self.n_points)}
@@ -217,55 +186,12 @@ class FixedContact(Contact):
     def to_dict(self, outputs: dict[str, np.ndarray]) -> dict[str, Any]:
         out = self._base_dict()
         out["pose"] = {"position": self.position.tolist(), "yaw": self.yaw}
-        out["forces"] = _forces_dict(self.patch.frame, outputs, f"contact.{self.name}")
+        out["cop_margin"] = self.cop_margin
+        out["forces"] = forces_dict(self.patch.frame, outputs, f"contact.{self.name}")
         return out
 
 
-def _forces_dict(frame: str, outputs: dict[str, np.ndarray], pre: str) -> list[dict[str, Any]]:
-    pts = outputs[f"{pre}.points"].reshape(3, -1, order="F").T
-    fs = outputs[f"{pre}.forces"].reshape(3, -1, order="F").T
-    return [
-        {"frame": frame, "point": p.tolist(), "force": f.tolist()}
-        for p, f in zip(pts, fs, strict=True)
-    ]
-
-
 # --------------------------------------------------------------------------- floating contacts
-def thin_scaling(polygon: ConvexPolygon, mode: str | float = "auto") -> np.ndarray:
-    """S (2, 2), the geometric scaling of sec. IV-F: S = U·diag(1, k)·Uᵀ with U the principal
-    axes of ``polygon`` (the minor one second). ``auto``: for a patch thinner than 5 cm,
-    k = min(0.1 m / minor width, 10), so a 2.5 cm rung is seen 10 cm wide by the solver, else
-    k = 1 (a mild scaling only costs the exact radius bounds); ``none``: k = 1; a number: k."""
-    v = polygon.vertices - polygon.centroid
-    _, vecs = np.linalg.eigh(v.T @ v)
-    U = vecs[:, ::-1]  # major axis first
-    widths = np.ptp(v @ U, axis=0)
-    if mode == "none":
-        k = 1.0
-    elif mode == "auto":
-        k = min(0.1 / max(widths[1], 1e-9), 10.0) if widths[1] < 0.05 else 1.0
-    else:
-        k = float(mode)
-    return U @ np.diag([1.0, k]) @ U.T
-
-
-@dataclass(frozen=True)
-class EllipseOptions:
-    """The contact ellipse of a non-inclusive contact (sec. IV).
-
-    ``formulation``: ``paper`` (eqs. 4-6, scaled by the edge length) or ``support`` (the
-    support-function form n·c + sqrt(rx²(n·u)² + ry²(n·v)²) <= b). ``min_radii`` (m) bound the
-    real ellipse's semi-axes from below (the smaller bound on the minor axis, the larger on the
-    major one); ``min_area`` (m²) its area; ``maximize_area`` weights eq. 8's cost
-    -π·rx·ry/min(A(P1), A(P2)); ``scaling`` is the thin-patch scaling of sec. IV-F."""
-
-    formulation: str = "support"
-    min_radii: tuple[float, float] = (0.005, 0.005)
-    min_area: float = 0.0
-    maximize_area: float = 0.0
-    scaling: str | float = "auto"
-
-
 @dataclass
 class FloatingContact(Contact):
     """A robot patch on a surface plane, free to slide and turn in it (paper eq. 2):
@@ -353,16 +279,21 @@ class _EllipseContact(FloatingContact):
     ellipse: EllipseOptions
 
     def _init_scaling(self) -> None:
-        """S (2, 2) of sec. IV-F for this surface, and whether it is not the identity."""
+        """S (2, 2) of sec. IV-F for this surface, whether it is not the identity, and the
+        default minimum radii when none are given."""
+        if self.ellipse.min_radii is None:
+            radii = default_min_radii(self.patch.polygon, self.surface.polygon)
+            self.ellipse = dataclasses.replace(self.ellipse, min_radii=radii)
         self.S = thin_scaling(self.surface.polygon, self.ellipse.scaling)
         self.scaled = not np.allclose(self.S, np.eye(2))
 
-    def _declare_ellipse(self, ctx: BuildContext, patch_vertices: ca.SX) -> ca.SX:
-        """Ellipse variables and the card(P1) + card(P2) inclusion rows; returns e (5,)."""
+    def _declare_ellipse(self, ctx: BuildContext, patch_vertices: ca.SX) -> tuple[ca.SX, ca.SX]:
+        """Ellipse variables and the card(P1) + card(P2) inclusion rows; returns e (5,) and
+        the real ellipse's B = S⁻¹·R(θ)·diag(rx, ry) (2, 2)."""
         from .geometry import ellipse_edge_constraints_paper, ellipse_edge_constraints_support
 
         nlp, pre = ctx.nlp, f"contact.{self.name}"
-        r_lo, r_hi = sorted(self.ellipse.min_radii)
+        r_lo, r_hi = self._min_radii()
         # unscaled plane: the radii are the real semi-axes, so the minimums are plain bounds
         # (exact up to the labelling, which θ makes free); scaled: eigenvalue rows below
         lb_r = (r_hi, r_lo) if not self.scaled else (1e-4, 1e-4)
@@ -405,7 +336,12 @@ class _EllipseContact(FloatingContact):
             nlp.minimize(f"{pre}.area", -self.ellipse.maximize_area * area / a_min)
         nlp.output(f"{pre}.ellipse", e)
         nlp.output(f"{pre}.ellipse_B", B)
-        return e
+        return e, B
+
+    def _min_radii(self) -> tuple[float, float]:
+        """(smaller, larger) minimum semi-axis [m]."""
+        lo, hi = sorted(self.ellipse.min_radii or (0.0, 0.0))
+        return lo, hi
 
     def _ellipse_parameters(self) -> dict[str, np.ndarray]:
         pre = f"contact.{self.name}"
@@ -425,7 +361,7 @@ class _EllipseContact(FloatingContact):
         # a real ellipse slightly above the minimum radii, aligned with the scaling's axes
         lam, U = np.linalg.eigh(self.S)  # eigenvalues (1, k) or (k, 1)
         major = U[:, int(np.argmin(lam))]
-        r_lo, r_hi = sorted(self.ellipse.min_radii)
+        r_lo, r_hi = self._min_radii()
         Sc = self.S @ centre
         theta = float(np.arctan2(major[1], major[0]))
         return np.array([Sc[0], Sc[1], theta, 1.2 * r_hi, 1.1 * r_lo * float(lam.max())])
@@ -446,7 +382,7 @@ class _EllipseContact(FloatingContact):
             "angle_in_surface": float(np.arctan2(U[1, 0], U[0, 0])),
             "center_in_surface": c2.tolist(),
             "formulation": self.ellipse.formulation,
-            "min_radii": sorted(self.ellipse.min_radii, reverse=True),
+            "min_radii": sorted(self._min_radii(), reverse=True),
             "min_area": self.ellipse.min_area,
         }
 
@@ -506,6 +442,7 @@ class SupportContact(_EllipseContact):
     points: int = 8
     friction: FrictionModel = field(default_factory=FrictionModel)
     type: str = "support"
+    cop_margin: float = field(default=DEFAULT_COP_MARGIN, kw_only=True)  # [m]
 
     def __post_init__(self) -> None:
         if self.points < 4:
@@ -525,12 +462,13 @@ class SupportContact(_EllipseContact):
             self.scaled,
             self.points,
             self.friction,
+            self.cop_margin > 0,
             *self._plane_key(),
         )
 
     def declare(self, ctx: BuildContext) -> None:
         Rs, ps, V, _, _ = self._declare_plane(ctx)
-        e = self._declare_ellipse(ctx, V)
+        e, B = self._declare_ellipse(ctx, V)
         Sinv = ca.inv(ca.reshape(ctx.nlp.p[f"contact.{self.name}.scaling"], 2, 2))
         c, s = ca.cos(e[2]), ca.sin(e[2])
         points = []
@@ -540,26 +478,37 @@ class SupportContact(_EllipseContact):
             q2 = Sinv @ ca.vertcat(e[0] + c * lx - s * ly, e[1] + s * lx + c * ly)
             points.append(ps + Rs @ ca.vertcat(q2, 0))
         pre = f"contact.{self.name}"
-        declare_forces(ctx, pre, self.patch.joint_id, points, self.friction, Rs)
+        phi_n = declare_forces(ctx, pre, self.patch.joint_id, points, self.friction, Rs)
+        if self.cop_margin > 0:
+            t = 2 * np.pi * np.arange(self.points) / self.points
+            radii = None if self.scaled else e[3:5]
+            declare_ellipse_cop(ctx.nlp, pre, phi_n, t, B, radii)
 
     def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
-        return {
+        out = {
             **self._plane_parameters(),
             **self._ellipse_parameters(),
             f"contact.{self.name}.mu": np.array([self.mu]),
         }
+        if self.cop_margin > 0:
+            out[f"contact.{self.name}.cop_margin"] = np.array([self.cop_margin])
+        return out
 
     def initial_guess(self, problem: Problem) -> dict[str, np.ndarray]:
         pre = f"contact.{self.name}"
-        return {
+        out = {
             f"{pre}.ellipse": self._ellipse_guess(problem),
             f"{pre}.forces": force_guess(problem, self.points),
         }
+        if self.cop_margin > 0:
+            out[f"{pre}.cop_kappa"] = np.array([kappa_guess(self.cop_margin, self._min_radii()[0])])
+        return out
 
     def to_dict(self, outputs: dict[str, np.ndarray]) -> dict[str, Any]:
         out = self._base_dict()
         out["ellipse"] = self._ellipse_dict(outputs)
-        out["forces"] = _forces_dict(self.patch.frame, outputs, f"contact.{self.name}")
+        out["forces"] = forces_dict(self.patch.frame, outputs, f"contact.{self.name}")
+        out["cop_margin"] = self.cop_margin
         return out
 
 

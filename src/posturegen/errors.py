@@ -30,3 +30,12 @@ class ModelError(PosturegenError):
 
 class SolveError(PosturegenError):
     """The solver could not be built or run (not: 'no posture found', which is a result)."""
+
+
+class PosturegenWarning(UserWarning):
+    """Base class of posturegen's warnings: the input is valid, the solve goes on."""
+
+
+class ImplausibleValueWarning(PosturegenWarning):
+    """A value that is valid but most likely a mistake (an angle in degrees, a length in mm):
+    the message is one line that names the field, like an :class:`InputError`'s."""

@@ -21,6 +21,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from .elastic import Elastic, soften
 from .errors import SolveError
 from .kinematics import CasadiKinematics, KinematicState, so3_exp
 from .robot import Robot
@@ -230,6 +231,16 @@ class _Layout:
     lbg: np.ndarray
     ubg: np.ndarray
 
+    @property
+    def n_x(self) -> int:
+        """Number of variables."""
+        return self.lbx.size
+
+    @property
+    def n_g(self) -> int:
+        """Number of constraint rows."""
+        return self.lbg.size
+
 
 @dataclass
 class CompiledNLP(_Layout):
@@ -263,16 +274,6 @@ class CompiledNLP(_Layout):
             self.solver, self.library = solver, True
         elif self.codegen_mode == "auto" and self.uses >= codegen.AUTO_BUILD_AFTER_USES:
             codegen.build_in_background(self.library_key, self.solver, self.nlp)
-
-    @property
-    def n_x(self) -> int:
-        """Number of variables."""
-        return self.lbx.size
-
-    @property
-    def n_g(self) -> int:
-        """Number of constraint rows."""
-        return self.lbg.size
 
 
 def _layout(blocks: dict[str, Any], size: Any) -> dict[str, slice]:
@@ -345,8 +346,14 @@ class Problem:
     torque_limit_scale: float = 1.0  # |τ_j| <= scale·effort_j
     solver_options: SolverOptions = field(default_factory=SolverOptions)
     collision_options: Any = None  # posturegen.collision.CollisionOptions; None: no avoidance
+    # [m] CoP margin of force-bearing contacts made from this problem's (posturegen.stance);
+    # None: posturegen.cop.DEFAULT_COP_MARGIN
+    cop_margin: float | None = None
     # the active collision rows of the current solve (set by posturegen.solve)
     collision_term: Term | None = None
+    # hard rows relaxed by L1-penalized slacks (posturegen.elastic; the diagnosis of a
+    # failure solves a copy of the problem with it); None: the real program
+    elastic: Elastic | None = None
 
     def terms(self) -> list[Term]:
         """Every term in declaration order."""
@@ -363,8 +370,13 @@ class Problem:
         ]
 
     def key(self) -> tuple[Any, ...]:
-        """The structure key: robot plus each term's key plus solver options."""
-        return (id(self.robot.model), tuple(t.key() for t in self.terms()), self.solver_options)
+        """The structure key: robot, each term's key, the elastic relaxation, solver options."""
+        return (
+            id(self.robot.model),
+            tuple(t.key() for t in self.terms()),
+            self.elastic,
+            self.solver_options,
+        )
 
     def compile(self) -> CompiledNLP:
         """The compiled program for this structure and these solver options (built once, then
@@ -416,7 +428,7 @@ class Problem:
 
     def _program(self) -> _Program:
         """The symbolic program of this structure (declared once, then cached)."""
-        key = self.key()[:2]
+        key = self.key()[:3]
         if key in _PROGRAMS:
             _PROGRAMS.move_to_end(key)
             return _PROGRAMS[key]
@@ -424,6 +436,8 @@ class Problem:
         ctx = BuildContext(robot=self.robot, nlp=nlp, kin=self.robot.kinematics)
         for term in self.terms():
             term.declare(ctx)
+        if self.elastic is not None:
+            soften(nlp, self.elastic)
         x = ca.vertcat(*[v[0] for v in nlp.x.values()])
         p = ca.vertcat(*nlp.p.values()) if nlp.p else ca.SX(0, 1)
         g = ca.vertcat(*[v[0] for v in nlp.g.values()])
@@ -475,8 +489,10 @@ class Problem:
         return x0, p, lbg, ubg
 
     def summary(self) -> str:
-        """Human-readable sizes of the program: variable and constraint blocks, cost terms."""
-        c = self.compile()
+        """Human-readable sizes of the program: variable and constraint blocks, cost terms
+        (collision rows: those of ``collision_term``, see :func:`posturegen.inspection.describe`
+        for the rows a solve starts with)."""
+        c = self._program()
         lines = [
             f"robot {self.robot.name}: nq={self.robot.model.nq}, nv={self.robot.model.nv}",
             f"variables: {c.n_x}",
@@ -489,7 +505,7 @@ class Problem:
 
     def constraint_counts(self) -> dict[str, int]:
         """Rows per constraint block."""
-        c = self.compile()
+        c = self._program()
         return {n: s.stop - s.start for n, s in c.g_index.items()}
 
 

@@ -22,6 +22,7 @@ import yaml
 from . import _fields as F
 from .errors import InputError, ModelError
 from .geometry import ConvexPolygon
+from .hints import with_hint
 from .kinematics import CasadiKinematics
 
 # robots shipped by name: the first three from example-robot-data, the paper's two in
@@ -105,7 +106,7 @@ class Robot:
             raise InputError(
                 field_name,
                 f"robot '{self.name}' has no frame '{name}'",
-                "use a link or frame name of the URDF",
+                with_hint(name, _frame_names(self.model), "use a link or frame name of the URDF"),
             )
         return int(self.model.getFrameId(name))
 
@@ -115,7 +116,11 @@ class Robot:
             raise InputError(
                 field_name,
                 f"robot '{self.name}' has no patch '{name}'",
-                f"known patches: {', '.join(sorted(self.patches)) or 'none'}",
+                with_hint(
+                    name,
+                    self.patches,
+                    f"known patches: {', '.join(sorted(self.patches)) or 'none'}",
+                ),
             )
         return self.patches[name]
 
@@ -155,7 +160,11 @@ class Robot:
                 raise InputError(
                     field_name,
                     f"unknown reference posture '{initial}'",
-                    f"known: {known}, or give the {self.model.nq} numbers of q",
+                    with_hint(
+                        initial,
+                        self.reference_configurations,
+                        f"known: {known}, or give the {self.model.nq} numbers of q",
+                    ),
                 )
             return self.on_ground(self.reference_configurations[initial])
         q = F.vector(initial, self.model.nq, field_name)
@@ -183,7 +192,9 @@ class Robot:
                 raise InputError(
                     fld,
                     f"robot '{self.name}' has no actuated joint '{name}'",
-                    f"use joint names of the URDF ({known}, ...)",
+                    with_hint(
+                        str(name), self.joint_names, f"use joint names of the URDF ({known}, ...)"
+                    ),
                 )
             joint = model.joints[jid]
             x = F.number(value, fld)
@@ -232,6 +243,11 @@ class Robot:
         }
 
 
+def _frame_names(model: pin.Model) -> list[str]:
+    """The names of a model's frames (links, joints and others)."""
+    return [str(f.name) for f in model.frames]
+
+
 def _load_patches(model: pin.Model, data: Any, field_name: str) -> dict[str, Patch]:
     patches_raw = F.require_mapping(data, field_name)
     patches: dict[str, Patch] = {}
@@ -244,7 +260,7 @@ def _load_patches(model: pin.Model, data: Any, field_name: str) -> dict[str, Pat
             raise InputError(
                 f"{fld}.frame",
                 f"the model has no frame '{frame}'",
-                "use a link or frame name of the URDF",
+                with_hint(frame, _frame_names(model), "use a link or frame name of the URDF"),
             )
         fid = int(model.getFrameId(frame))
         T = F.placement(spec.get("position", [0, 0, 0]), spec.get("rpy", [0, 0, 0]), fld)
@@ -329,7 +345,9 @@ def load_bundled(name: str) -> Robot:
         raise InputError(
             "robot",
             f"unknown robot '{name}'",
-            f"bundled robots: {', '.join(BUNDLED)}, or give {{urdf: PATH, ...}}",
+            with_hint(
+                name, BUNDLED, f"bundled robots: {', '.join(BUNDLED)}, or give {{urdf: PATH, ...}}"
+            ),
         )
     data = read_patch_file(_bundled_patch_file(name))
     if data.get("models") == "posturegen":

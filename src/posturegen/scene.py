@@ -11,6 +11,8 @@ import pinocchio as pin
 from . import _fields as F
 from .errors import InputError
 from .geometry import ConvexPolygon
+from .hints import with_hint
+from .plausible import check_size
 
 
 @dataclass(frozen=True)
@@ -73,7 +75,11 @@ class Scene:
             raise InputError(
                 field_name,
                 f"no surface named '{name}'",
-                f"known surfaces: {', '.join(sorted(self.surfaces)) or 'none'}",
+                with_hint(
+                    name,
+                    self.surfaces,
+                    f"known surfaces: {', '.join(sorted(self.surfaces)) or 'none'}",
+                ),
             )
         return self.surfaces[name]
 
@@ -97,6 +103,7 @@ class Scene:
                 F.points2d(s["vertices"], f"{fld}.vertices"), field=f"{fld}.vertices"
             )
             thickness = F.number(s.get("thickness", 0.02), f"{fld}.thickness", positive=True)
+            check_size(float(np.ptp(poly.vertices, axis=0).max()), f"{fld}.vertices", "surface")
             out[name] = Surface(name, T, poly, thickness)
         obs: list[Obstacle] = []
         if not isinstance(obstacles, list):
@@ -110,6 +117,7 @@ class Scene:
                 raise InputError(
                     f"{fld}.box", "box sizes must be positive", "write [sx, sy, sz] > 0"
                 )
+            check_size(float(size.max()), f"{fld}.box", "box")
             obs.append(
                 Obstacle(
                     F.string(o["name"], f"{fld}.name"),

@@ -31,6 +31,7 @@ import yaml
 
 from . import _fields as F
 from .contacts import FixedContact, FloatingContact
+from .diagnose import diagnose as diagnosed
 from .errors import InputError
 from .problem import Problem
 from .robot import load_robot
@@ -50,7 +51,7 @@ class StageReport:
     posture_file: str
     result: Result
     wall_time_s: float
-    diagnosis: str = ""  # for a failed stage: which relaxation would let it solve
+    diagnosis: str = ""  # for a failed stage: what blocks it (posturegen.diagnose)
 
     def to_dict(self) -> dict[str, Any]:
         """The stage's entry of ``sequence.json``."""
@@ -88,6 +89,7 @@ def placed_initial(robot_spec: Any, base: Any, field_name: str = "initial.base")
     the first stage's contacts decide the height)."""
     robot = load_robot(robot_spec)
     b = F.vector(base, 3, field_name)
+    F.angle(b[2], f"{field_name}[2]")
     q = robot.q_init.copy()
     q[0:2] = b[0:2]
     R0 = pin.Quaternion(q[3:7]).normalized().matrix()
@@ -123,8 +125,10 @@ def _kept(
         position, yaw = old.realized_pose(previous.robot.model, q_prev)
     else:  # pragma: no cover - every contact type is one of the two
         raise InputError(f"{fld}.type", f"cannot keep contact '{name}'", "fix it explicitly")
-    out = {k: v for k, v in c.items() if k in ("name", "mu", "friction")}
+    out = {k: v for k, v in c.items() if k in ("name", "mu", "friction", "cop_margin")}
     out.setdefault("mu", float(old.mu))  # a kept contact keeps its friction coefficient
+    if hasattr(old, "cop_margin"):  # and its CoP margin (else the stage's options give it)
+        out.setdefault("cop_margin", float(old.cop_margin))
     out.update(
         {
             "robot_patch": old.patch.name,
@@ -184,7 +188,8 @@ def run_sequence(
 
     ``progress(k, n, stage_name, report)`` is called before (report None) and after each
     stage. A failed stage ends the sequence (its posture file is still written); with
-    ``diagnose`` its report says which relaxation would let it solve (:func:`diagnose_failure`)."""
+    ``diagnose`` its report and posture file say what blocks it
+    (:func:`posturegen.diagnose.diagnose`)."""
     seq = F.require_mapping(seq, "sequence")
     F.check_keys(
         seq,
@@ -208,14 +213,15 @@ def run_sequence(
         data = stage_problem_dict(seq, stage, k, previous, q_prev)
         problem = problem_from_dict(data)
         result = solve(problem)
+        if diagnose:
+            result = diagnosed(problem, result)
         wall = time.perf_counter() - t0
         stem = f"{k:02d}-{_slug(name)}"
         (out / f"{stem}.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
         posture = dict(result.posture)
         posture["stage"] = {"index": k, "name": name, "sequence": report.name}
         (out / f"{stem}.json").write_text(json.dumps(posture, indent=1))
-        diagnosis = "" if result.success or not diagnose else diagnose_failure(data)
-        rep = StageReport(name, f"{stem}.yaml", f"{stem}.json", result, wall, diagnosis)
+        rep = StageReport(name, f"{stem}.yaml", f"{stem}.json", result, wall, result.diagnosis)
         report.stages.append(rep)
         if progress:
             progress(k, len(stages), name, rep)
@@ -224,54 +230,6 @@ def run_sequence(
             break
         previous, q_prev = problem, result.q
     return report
-
-
-RELAXED_TORQUE_SCALE = 10.0
-
-
-def diagnose_failure(data: dict[str, Any]) -> str:
-    """Why a stage's problem dict found no posture, by solving relaxed copies of it: with the
-    torque limits ×RELAXED_TORQUE_SCALE, without collision avoidance, then without both. One
-    line."""
-    options = data.get("options", {}) or {}
-    avoids = bool(options.get("self_collision")) or options.get("environment_collision", True)
-
-    def attempt(torque: bool, collision: bool) -> Result:
-        relaxed = copy.deepcopy(data)
-        opts = relaxed.setdefault("options", {})
-        if torque:
-            opts["torque_limit_scale"] = RELAXED_TORQUE_SCALE * opts.get("torque_limit_scale", 1)
-        if collision:
-            opts["self_collision"], opts["environment_collision"] = False, False
-        return solve(problem_from_dict(relaxed))
-
-    torque = attempt(True, False)
-    if torque.success:
-        problem = problem_from_dict(data)
-        ratio = np.abs(torque.torques) / problem.robot.model.effortLimit[6:]
-        j = int(np.argmax(ratio))
-        return (
-            "the robot cannot do it within its torque limits: with them ×"
-            f"{RELAXED_TORQUE_SCALE:g} it can, needing {ratio[j]:.2f}× the limit of "
-            f"{problem.robot.joint_names[j]}"
-        )
-    if not avoids:
-        return (
-            f"no posture even with the torque limits ×{RELAXED_TORQUE_SCALE:g}: the contacts "
-            "are out of reach"
-        )
-    free = attempt(False, True)
-    if free.success:
-        return (
-            "only by colliding: without collision avoidance it solves, so the scene's "
-            "obstacles or the robot's own body (its proxies) leave no room"
-        )
-    if attempt(True, True).success:
-        return "only by colliding and beyond its torque limits (it solves without both)"
-    return (
-        f"no posture even with the torque limits ×{RELAXED_TORQUE_SCALE:g} and without "
-        "collision avoidance: the contacts are out of reach"
-    )
 
 
 def _write_index(seq: dict[str, Any], report: SequenceReport, out: Path) -> None:

@@ -21,10 +21,8 @@ from .collision import (
     CollisionTerm,
     env_boxes,
     excluded_joint_ids,
-    proxy_model,
     separated_start,
 )
-from .kinematics import scratch_data
 from .pairs import pair_rule, unchecked_entries
 from .problem import _CACHE, Problem, SolverOptions
 from .verify import SCHEMA, VerifyReport, verify_posture
@@ -57,6 +55,8 @@ class Result:
     cost: float
     verification: VerifyReport
     posture: dict[str, Any]  # the posture-file content
+    # why no posture was found, one line (posturegen.diagnose.diagnose); "" when not diagnosed
+    diagnosis: str = ""
 
     @property
     def max_violation(self) -> float:
@@ -93,13 +93,20 @@ def _run_ipopt(
     lam_x0: np.ndarray | None = None,
     lam_g0: dict[str, np.ndarray] | None = None,
     joints0: np.ndarray | None = None,
+    layout: dict[str, slice] | None = None,
 ) -> _Run:
     """One IPOPT run; with ``lam_g0`` (multipliers per constraint block) a warm start; without
-    ``x0``, the problem's initial guess with ``joints0`` (nj,) for the joints when given."""
+    ``x0``, the problem's initial guess with ``joints0`` (nj,) for the joints when given.
+    ``layout``: the variable blocks of ``x0`` and ``lam_x0`` when they may differ from this
+    program's (an elastic program's collision slacks grow with the active set)."""
     built_before = problem.key() in _CACHE
     compiled = problem.compile()
     compiled.refresh()  # generated C once it is built (posturegen.codegen)
     x_init, p, lbg, ubg = problem.numeric(compiled)
+    if x0 is not None and layout is not None and layout != compiled.x_index:
+        x0 = _carried(x0, layout, compiled.x_index, x_init)
+        if lam_x0 is not None:
+            lam_x0 = _carried(lam_x0, layout, compiled.x_index, np.zeros_like(x_init))
     if x0 is not None and x0.shape == x_init.shape:
         x_init = x0
     elif joints0 is not None:
@@ -129,6 +136,19 @@ def _run_ipopt(
         lam_x=np.array(sol["lam_x"]).ravel(),
         lam_g=np.array(sol["lam_g"]).ravel(),
     )
+
+
+def _carried(
+    values: np.ndarray, old: dict[str, slice], new: dict[str, slice], default: np.ndarray
+) -> np.ndarray:
+    """``values`` laid out by the blocks ``old``, moved to the blocks ``new`` (the blocks of
+    another size, or new ones, from ``default``)."""
+    out = default.copy()
+    for name, sl in new.items():
+        src = old.get(name)
+        if src is not None and src.stop - src.start == sl.stop - sl.start:
+            out[sl] = values[src]
+    return out
 
 
 def _block_multipliers(run: _Run, term: Any) -> dict[str, np.ndarray]:
@@ -191,7 +211,8 @@ def solve(problem: Problem, x0: np.ndarray | None = None) -> Result:
     The pairs used are remembered per problem structure; the next problem of that structure
     starts with them. When IPOPT does not converge, two continuations follow: without the
     collision rows, then with the torque limits relaxed, each solution starting the real
-    program again. The Result counts every IPOPT run."""
+    program again. The Result counts every IPOPT run. Why a failure failed:
+    :func:`posturegen.diagnose.diagnose`."""
     x_start = None if x0 is None else np.asarray(x0, dtype=float)
     result, runs = _solve_continued(problem, x_start, [])
     effort = problem.robot.effort_limit
@@ -207,6 +228,12 @@ def solve(problem: Problem, x0: np.ndarray | None = None) -> Result:
         return result
     retry, _ = _solve_continued(problem, relaxed_runs[-1].x, relaxed_runs)
     return retry if retry.success else result
+
+
+def _outputs(run: _Run) -> dict[str, np.ndarray]:
+    """The program's outputs at a run's solution, flattened (column-major)."""
+    out = run.compiled.outputs(x=run.x, p=run.p)
+    return {k: np.array(v).ravel(order="F") for k, v in out.items()}
 
 
 def _solve_continued(
@@ -239,12 +266,16 @@ def _solve_continued(
 
 
 def _solve_avoiding(
-    problem: Problem, x0: np.ndarray | None, prior: list[_Run]
+    problem: Problem,
+    x0: np.ndarray | None,
+    prior: list[_Run],
+    layout: dict[str, slice] | None = None,
 ) -> tuple[Result, list[_Run]]:
-    """The active-set loop of :func:`solve` from ``x0``; ``prior`` runs count in the
-    Result's iterations and times. Returns the Result and every run so far."""
+    """The active-set loop of :func:`solve` from ``x0`` (laid out as ``layout``, default
+    this program's); ``prior`` runs count in the Result's iterations and times. Returns the
+    Result and every run so far."""
     opts = problem.collision_options
-    active = _active_set(problem)
+    active = ActiveSet.of(problem)
     joints0 = None  # the first start: q_init with its pressed self pairs parted
     if x0 is None and len(active.links):
         joints0 = separated_start(
@@ -260,7 +291,7 @@ def _solve_avoiding(
     active.self_pairs, active.env_pairs = set(learned_self), set(learned_env)
     cold = problem.solver_options
     problem.solver_options = _collision_solver_options(cold)
-    loop = _Loop(problem, active, problem.solver_options, x0, joints0)
+    loop = _Loop(problem, active, problem.solver_options, x0, joints0, layout)
     result: Result | None = None
     try:
         for _attempt in range(opts.tighten + 1):
@@ -276,19 +307,6 @@ def _solve_avoiding(
     finally:
         problem.solver_options = cold
     return result, [*prior, *loop.runs]  # type: ignore[return-value]
-
-
-def _active_set(problem: Problem) -> ActiveSet:
-    """An empty active set for the problem: its candidate self pairs (those the pair rule
-    leaves checked, minus the user's exclusions; none without self-collision) and boxes."""
-    opts = problem.collision_options
-    robot = problem.robot
-    pm = proxy_model(robot)
-    links = np.zeros(0, dtype=int)
-    if opts.self_collision:
-        links = pm.links_of(frozenset(excluded_joint_ids(robot, opts)))
-    model = robot.model
-    return ActiveSet(pm, links, env_boxes(problem), opts, model, scratch_data(model))
 
 
 def _collision_solver_options(options: SolverOptions) -> SolverOptions:
@@ -313,6 +331,7 @@ class _Loop:
     cold_run: SolverOptions
     x_warm: np.ndarray | None
     joints0: np.ndarray | None
+    layout: dict[str, slice] | None = None  # the blocks of x_warm when not this program's
     runs: list[_Run] = dataclasses.field(default_factory=list)
     lam: dict[str, Any] | None = None
     margin: float = 0.0
@@ -341,11 +360,12 @@ class _Loop:
             problem.collision_term = term
             if self.lam is None:
                 problem.solver_options = self.cold_run
-                run = _run_ipopt(problem, self.x_warm, joints0=self.joints0)
+                run = _run_ipopt(problem, self.x_warm, joints0=self.joints0, layout=self.layout)
             else:
                 problem.solver_options = dataclasses.replace(self.cold_run, warm_start=True)
                 lam = _map_collision_multipliers(self.lam, term)
-                run = _run_ipopt(problem, self.x_warm, self.runs[-1].lam_x, lam)
+                layout = self.runs[-1].compiled.x_index
+                run = _run_ipopt(problem, self.x_warm, self.runs[-1].lam_x, lam, layout=layout)
             self.runs.append(run)
             if run.status not in _IPOPT_OK:
                 return
@@ -357,8 +377,7 @@ class _Loop:
 def _result(problem: Problem, runs: list[_Run], margin: float | None = None) -> Result:
     """The Result of the last run (times and iterations summed over every run)."""
     run = runs[-1]
-    out = run.compiled.outputs(x=run.x, p=run.p)
-    outputs = {k: np.array(v).ravel(order="F") for k, v in out.items()}
+    outputs = _outputs(run)
     q = configuration_from_x(problem, run.compiled, run.x)
     torques = outputs["torques"]
     posture = posture_dict(problem, q, torques, outputs, margin)
@@ -387,6 +406,7 @@ def _result(problem: Problem, runs: list[_Run], margin: float | None = None) -> 
             "solve_time_s": solve_time,
             "ipopt_runs": len(runs),
             "max_violation": report.max_violation,
+            "diagnosis": None,
             "checks": {
                 c.name: {"value": c.value, "tolerance": c.tolerance, "ok": c.ok, "detail": c.detail}
                 for c in report.checks

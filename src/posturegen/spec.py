@@ -5,6 +5,7 @@ Every mistake raises one :class:`~posturegen.errors.InputError` naming the field
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -17,16 +18,20 @@ from .collision import MARGIN, CollisionOptions, excluded_joint_ids
 from .constraints import PositionTask
 from .contacts import (
     Contact,
-    EllipseOptions,
     FixedContact,
-    FrictionModel,
     GeometricContact,
     InclusiveContact,
     PointContact,
     SupportContact,
 )
+from .cop import DEFAULT_COP_MARGIN
 from .costs import ForceCost, PostureCost, TorqueCost
+from .ellipse_options import EllipseOptions
 from .errors import InputError
+from .friction import FRICTION_KINDS, FrictionModel
+from .hints import with_hint
+from .placement import place_on_fixed_contacts
+from .plausible import check_angles, check_target
 from .problem import Problem, SolverOptions, Term
 from .robot import Robot, load_robot
 from .scene import Scene
@@ -77,9 +82,11 @@ def _friction(value: Any, field: str) -> FrictionModel:
     v = F.require_mapping(value, field)
     F.check_keys(v, field, ["model"], ["faces"])
     kind = F.string(v["model"], f"{field}.model")
-    if kind not in ("pyramid", "cone"):
+    if kind not in FRICTION_KINDS:
         raise InputError(
-            f"{field}.model", f"unknown friction model '{kind}'", "use pyramid or cone"
+            f"{field}.model",
+            f"unknown friction model '{kind}'",
+            with_hint(kind, ("pyramid", "cone"), "use pyramid or cone"),
         )
     faces = v.get("faces", 4)
     if isinstance(faces, bool) or not isinstance(faces, int) or faces < 3:
@@ -89,25 +96,30 @@ def _friction(value: Any, field: str) -> FrictionModel:
 
 _ELLIPSE_KEYS = ["formulation", "min_radii", "min_area", "maximize_area", "scaling"]
 _CONTACT_KEYS = {
-    "fixed": ["position", "yaw", "mu", "friction"],
+    "fixed": ["position", "yaw", "mu", "friction", "cop_margin"],
     "geometric": [*_ELLIPSE_KEYS, "yaw_range"],
-    "support": [*_ELLIPSE_KEYS, "points", "mu", "friction", "yaw_range"],
+    "support": [*_ELLIPSE_KEYS, "points", "mu", "friction", "yaw_range", "cop_margin"],
     "inclusive": ["yaw_range"],
     "point": ["point", "yaw_range"],
 }
+
+
+_ANY_CONTACT_KEY = sorted({k for keys in _CONTACT_KEYS.values() for k in keys})
 
 
 def _yaw_range(c: dict[str, Any], fld: str) -> tuple[float, float] | None:
     """A floating contact's optional yaw bounds [ψ_min, ψ_max] (rad), less than a turn apart."""
     if c.get("yaw_range") is None:
         return None
-    lo, hi = (float(v) for v in F.vector(c["yaw_range"], 2, f"{fld}.yaw_range"))
+    bounds = F.vector(c["yaw_range"], 2, f"{fld}.yaw_range")
+    lo, hi = (float(v) for v in bounds)
     if not lo < hi < lo + 2 * np.pi:
         raise InputError(
             f"{fld}.yaw_range",
             f"[{lo:g}, {hi:g}] is not an interval shorter than a turn",
             "write [min, max] in rad with min < max < min + 2π (omit it for any yaw)",
         )
+    check_angles(bounds, f"{fld}.yaw_range")
     return lo, hi
 
 
@@ -116,7 +128,9 @@ def _ellipse_options(c: Any, fld: str) -> EllipseOptions:
     form = F.string(c.get("formulation", base.formulation), f"{fld}.formulation")
     if form not in ("paper", "support"):
         raise InputError(
-            f"{fld}.formulation", f"unknown formulation '{form}'", "use paper or support"
+            f"{fld}.formulation",
+            f"unknown formulation '{form}'",
+            with_hint(form, ("paper", "support"), "use paper or support"),
         )
     radii = base.min_radii
     if "min_radii" in c:
@@ -144,16 +158,18 @@ def _contact(
     mu: float,
     friction: FrictionModel,
     names: set[str],
+    cop_margin: float = DEFAULT_COP_MARGIN,
 ) -> Contact:
     fld = f"contacts[{i}]"
     c = F.require_mapping(c, fld)
-    F.check_keys(c, fld, ["robot_patch", "surface", "type"], list(c))  # required first
+    # required first, and misspelt keys of any contact type
+    F.check_keys(c, fld, ["robot_patch", "surface", "type"], ["name", *_ANY_CONTACT_KEY])
     ctype = F.string(c["type"], f"{fld}.type")
     if ctype not in CONTACT_TYPES:
         raise InputError(
             f"{fld}.type",
             f"unknown contact type '{ctype}'",
-            f"use one of: {', '.join(CONTACT_TYPES)}",
+            with_hint(ctype, CONTACT_TYPES, f"use one of: {', '.join(CONTACT_TYPES)}"),
         )
     F.check_keys(c, fld, ["robot_patch", "surface", "type"], ["name", *_CONTACT_KEYS[ctype]])
     patch = robot.patch(F.string(c["robot_patch"], f"{fld}.robot_patch"), f"{fld}.robot_patch")
@@ -167,6 +183,7 @@ def _contact(
     mu_c = F.number(c.get("mu", mu), f"{fld}.mu", minimum=0.0)
     fric = _friction(c["friction"], f"{fld}.friction") if "friction" in c else friction
     yr = _yaw_range(c, fld)
+    cop = F.number(c.get("cop_margin", cop_margin), f"{fld}.cop_margin", minimum=0.0)
     if ctype == "geometric":
         return GeometricContact(name, patch, surface, mu_c, _ellipse_options(c, fld), yaw_range=yr)
     if ctype == "support":
@@ -174,7 +191,9 @@ def _contact(
         if isinstance(k, bool) or not isinstance(k, int) or k < 4:
             raise InputError(f"{fld}.points", f"expected an integer >= 4, got {k!r}", "use 8")
         ell = _ellipse_options(c, fld)
-        return SupportContact(name, patch, surface, mu_c, ell, k, fric, yaw_range=yr)
+        return SupportContact(
+            name, patch, surface, mu_c, ell, k, fric, yaw_range=yr, cop_margin=cop
+        )
     if ctype == "inclusive":
         return InclusiveContact(name, patch, surface, mu_c, yaw_range=yr)
     if ctype == "point":
@@ -193,11 +212,13 @@ def _contact(
             "add position: [x, y] in the surface frame",
         )
     pos = F.vector(c["position"], 2, f"{fld}.position")
-    yaw = F.number(c.get("yaw", 0.0), f"{fld}.yaw")
+    yaw = F.angle(c.get("yaw", 0.0), f"{fld}.yaw")
     try:
-        return FixedContact(name, patch, surface, pos, yaw, mu_c, fric)
+        return FixedContact(name, patch, surface, pos, yaw, mu_c, fric, cop_margin=cop)
     except InputError as exc:
-        raise InputError(fld, exc.problem, exc.fix) from exc
+        raise InputError(
+            f"{fld}.cop_margin" if exc.field == "cop_margin" else fld, exc.problem, exc.fix
+        ) from exc
 
 
 def _task(t: Any, i: int, robot: Robot) -> PositionTask:
@@ -205,13 +226,19 @@ def _task(t: Any, i: int, robot: Robot) -> PositionTask:
     t = F.require_mapping(t, fld)
     F.check_keys(t, fld, ["type", "frame", "target"], ["rpy", "weight"])
     if t["type"] != "position":
-        raise InputError(f"{fld}.type", f"unknown task type {t['type']!r}", "use position")
+        raise InputError(
+            f"{fld}.type",
+            f"unknown task type {t['type']!r}",
+            with_hint(str(t["type"]), ["position"], "use position"),
+        )
     frame = F.string(t["frame"], f"{fld}.frame")
     fid = robot.frame_id(frame, f"{fld}.frame")
     target = F.vector(t["target"], 3, f"{fld}.target")
     R = None
     if t.get("rpy") is not None:
-        R = pin.rpy.rpyToMatrix(*F.vector(t["rpy"], 3, f"{fld}.rpy"))
+        rpy = F.vector(t["rpy"], 3, f"{fld}.rpy")
+        check_angles(rpy, f"{fld}.rpy")
+        R = pin.rpy.rpyToMatrix(*rpy)
     weight = (
         F.number(t["weight"], f"{fld}.weight", positive=True)
         if t.get("weight") is not None
@@ -278,13 +305,16 @@ def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
     if not isinstance(contacts_raw, list) or not contacts_raw:
         raise InputError("contacts", "expected a non-empty list", "add at least one contact")
     names: set[str] = set()
+    cop = _cop_margin(data.get("options"))
     contacts = [
-        _contact(c, i, robot, scene, mu, friction, names) for i, c in enumerate(contacts_raw)
+        _contact(c, i, robot, scene, mu, friction, names, cop) for i, c in enumerate(contacts_raw)
     ]
     tasks_raw = data.get("tasks", []) or []
     if not isinstance(tasks_raw, list):
         raise InputError("tasks", "expected a list", "write tasks: [{type: position, ...}]")
     tasks: list[Term] = [_task(t, i, robot) for i, t in enumerate(tasks_raw)]
+    for i, t in enumerate(tasks):
+        check_target(robot, t, contacts, f"tasks[{i}].target")  # a warning at most
     options = F.require_mapping(data.get("options", {}) or {}, "options")
     F.check_keys(
         options,
@@ -298,13 +328,37 @@ def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
             "environment_collision",
             "collision_margin",
             "collision_exclude",
+            "cop_margin",
         ],
     )
     torque_scale = F.number(
         options.get("torque_limit_scale", 1.0), "options.torque_limit_scale", positive=True
     )
     q_init = robot.initial_configuration(options.get("initial"), "options.initial")
+    if not _gives_base(options.get("initial")):  # a name, joints or nothing: place the base
+        q_init = place_on_fixed_contacts(robot, q_init, contacts)
     self_collision = _flag(options.get("self_collision", False), "options.self_collision")
+    collision = _collision_options(options, robot, scene, self_collision)
+    solver = _solver_options(options.get("solver", {}) or {})
+    return Problem(
+        robot,
+        scene,
+        contacts,
+        tasks,
+        _costs(data.get("costs")),
+        np.asarray(q_init),
+        self_collision,
+        torque_scale,
+        solver,
+        collision,
+        cop_margin=cop,
+    )
+
+
+def _collision_options(
+    options: Any, robot: Robot, scene: Scene, self_collision: bool
+) -> CollisionOptions | None:
+    """What to avoid (None: nothing), from the problem's options."""
     env = options.get("environment_collision", "auto")
     if env != "auto":
         env = _flag(env, "options.environment_collision")
@@ -321,25 +375,27 @@ def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
             "expected a list of [link, link] pairs",
             "write [[link_a, link_b], ...]",
         )
-    collision = None
-    if self_collision or avoid_env:
-        collision = CollisionOptions(
-            self_collision, margin, tuple(tuple(p) for p in exclude), environment=avoid_env
-        )
-        excluded_joint_ids(robot, collision)  # names are checked here
-    solver = _solver_options(options.get("solver", {}) or {})
-    return Problem(
-        robot,
-        scene,
-        contacts,
-        tasks,
-        _costs(data.get("costs")),
-        np.asarray(q_init),
-        self_collision,
-        torque_scale,
-        solver,
-        collision,
+    if not (self_collision or avoid_env):
+        return None
+    collision = CollisionOptions(
+        self_collision, margin, tuple(tuple(p) for p in exclude), environment=avoid_env
     )
+    excluded_joint_ids(robot, collision)  # names are checked here
+    return collision
+
+
+def _cop_margin(options: Any) -> float:
+    """``options.cop_margin`` [m], the default of every force-bearing contact."""
+    value = options.get("cop_margin") if isinstance(options, Mapping) else None
+    if value is None:
+        return DEFAULT_COP_MARGIN
+    return F.number(value, "options.cop_margin", minimum=0.0)
+
+
+def _gives_base(initial: Any) -> bool:
+    """Whether ``options.initial`` gives the base placement (the nq numbers of q), rather than
+    a reference posture's name, a joint mapping or nothing (the robot's default)."""
+    return initial is not None and not isinstance(initial, str | Mapping)
 
 
 def _flag(value: Any, field: str) -> bool:

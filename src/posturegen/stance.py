@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import dataclasses
 
-from .contacts import FixedContact, FloatingContact, FrictionModel
+from .contacts import FixedContact
+from .cop import DEFAULT_COP_MARGIN
 from .errors import InputError
+from .friction import FrictionModel
 from .problem import Problem
 from .solve import Result
 
@@ -20,7 +22,9 @@ def next_problem(
     tasks: list | None = None,
 ) -> Problem:
     """The problem of the next stance: contact ``fix`` (geometric, support, inclusive or point)
-    frozen at its pose in ``result`` as a ``fixed`` contact, contact ``release`` removed, the
+    frozen at its pose in ``result`` as a ``fixed`` contact (a contact already fixed stays as
+    it is: ``result`` realized its pose) with the CoP margin of the contact, or else of the
+    problem, contact ``release`` removed, the
     posture of ``result`` as the initial posture (warm start), ``tasks`` replacing the tasks
     when given."""
     names = [c.name for c in problem.contacts]
@@ -35,11 +39,22 @@ def next_problem(
     if not result.success:
         raise InputError("result", "the posture was not verified", "fix a contact of a success")
     old = problem.contacts[names.index(fix)]
-    if not isinstance(old, FloatingContact):
-        raise InputError("fix", f"contact '{fix}' is already {old.type}", "fix a floating contact")
-    position, yaw = old.realized_pose(problem.robot.model, result.q)
-    friction = getattr(old, "friction", FrictionModel())
-    fixed = FixedContact(old.name, old.patch, old.surface, position, yaw, old.mu, friction)
+    if isinstance(old, FixedContact):
+        fixed = old  # already fixed: it stays where it is (its realized pose, to 1e-6)
+    else:
+        position, yaw = old.realized_pose(problem.robot.model, result.q)
+        friction = getattr(old, "friction", FrictionModel())
+        margin = getattr(old, "cop_margin", problem.cop_margin)
+        fixed = FixedContact(
+            old.name,
+            old.patch,
+            old.surface,
+            position,
+            yaw,
+            old.mu,
+            friction,
+            cop_margin=DEFAULT_COP_MARGIN if margin is None else margin,
+        )
     contacts = [fixed if c.name == fix else c for c in problem.contacts if c.name != release]
     return dataclasses.replace(
         problem,

@@ -10,6 +10,7 @@ FILE`` and :func:`posturegen.solve.solve` run exactly the same checks:
   contact sits at its given pose, a floating one within its yaw range, each force point lies in
   both polygons, each ellipse lies in both polygons;
 - friction: each force inside its exact cone |f_t| <= μ f_n (f_n >= 0);
+- centre of pressure: at least the contact's ``cop_margin`` inside its contact region;
 - tasks: each hard target reached.
 """
 
@@ -24,7 +25,7 @@ import pinocchio as pin
 
 from .checks import Check, VerifyReport
 from .errors import InputError
-from .geometry import ConvexPolygon, Ellipse
+from .geometry import ConvexPolygon, Ellipse, intersect
 from .kinematics import scratch_data
 from .mesh_check import mesh_collision_checks
 
@@ -38,6 +39,10 @@ TOL_EQUILIBRIUM = 1e-6  # relative to the robot's weight [N] (and weight·1 m [N
 TOL_GEOMETRY = 1e-6  # [m] and [rad]
 TOL_FRICTION = 1e-6  # relative to the robot's weight [N]
 TOL_TASK = 1e-6  # [m] and [rad]
+# [relative to the weight] a contact bearing less counts its CoP shortfall in proportion to its
+# load: the solver meets the CoP rows to 1e-9 of the weight·margin, so the CoP of a contact
+# that bears almost nothing is defined only that loosely (and matters as little)
+COP_FULL_LOAD = 1e-3
 
 
 def _poly_in_plane(T_world_plane: pin.SE3, points_world: np.ndarray) -> np.ndarray:
@@ -88,7 +93,7 @@ def verify_posture(
     weight = pin.computeTotalMass(model) * float(np.linalg.norm(gravity))
     residual = _gravity_torques(model, data, q, gravity)
     residual[6:] += tau
-    geo, fric, inside, ellipse_size = 0.0, 0.0, 0.0, 0.0
+    geo, fric, inside, ellipse_size, cop = 0.0, 0.0, 0.0, 0.0, 0.0
     for contact in posture.get("contacts", []):
         surf = contact["surface"]
         T_ws = pin.SE3(np.array(surf["placement"], dtype=float))
@@ -140,6 +145,7 @@ def verify_posture(
             J = pin.getJointJacobian(model, data, jid, pin.LOCAL_WORLD_ALIGNED)
             lever = p_w - data.oMi[jid].translation
             residual += J[:3].T @ f_w + J[3:].T @ np.cross(lever, f_w)
+        cop = max(cop, cop_shortfall(contact, T_ws, P_s, T_wc, P_c, weight))
         if contact["type"] == "inclusive":
             v_c = np.column_stack([P_c.vertices, np.zeros(P_c.n)])
             v_w = v_c @ T_wc.rotation.T + T_wc.translation
@@ -161,6 +167,7 @@ def verify_posture(
     checks.append(Check("contact points inside polygons", max(inside, 0.0), TOL_GEOMETRY))
     checks.append(Check("friction cones", max(fric, 0.0), TOL_FRICTION))
     checks.append(Check("contact ellipse size", max(ellipse_size, 0.0), TOL_GEOMETRY))
+    checks.append(Check("centre of pressure margin", max(cop, 0.0), TOL_GEOMETRY))
     scale = np.full(model.nv, weight)
     checks.append(
         Check("static equilibrium", float(np.abs(residual / scale).max()), TOL_EQUILIBRIUM)
@@ -257,6 +264,58 @@ def _ellipse_outside(
         e = Ellipse(loc_c[:2], float(np.arctan2(u[1], u[0])), (r1, r2))
         out = max(out, -e.inside_margin(P_s))
     return out
+
+
+def cop_shortfall(
+    contact: dict[str, Any],
+    T_ws: pin.SE3,
+    P_s: ConvexPolygon,
+    T_wc: pin.SE3,
+    P_c: ConvexPolygon,
+    weight: float,
+) -> float:
+    """How far [m] the centre of pressure CoP = Σ f_n,i·p_i / Σ f_n,i (surface plane) of a
+    contact's forces is short of its ``cop_margin`` inside its contact region: its ellipse
+    (support), else the intersection of both polygons at the realized pose (fixed). <= 0 when
+    it is far enough inside; 0 without a margin or a load; a contact bearing less than
+    COP_FULL_LOAD of the weight counts in proportion to its load."""
+    margin = float(contact.get("cop_margin") or 0.0)
+    forces = contact.get("forces") or []
+    if margin <= 0.0 or not forces:
+        return 0.0
+    points = _poly_in_plane(T_ws, np.array([f["point"] for f in forces], dtype=float))[:, :2]
+    fn = np.array([f["force"] for f in forces], dtype=float) @ T_ws.rotation[:, 2]  # (k,) [N]
+    total = float(fn.sum())
+    if total <= 0.0:
+        return 0.0
+    cop = fn @ points / total  # (2,)
+    ell = contact.get("ellipse")
+    if ell is not None:
+        centre = _poly_in_plane(T_ws, np.asarray(ell["center"], dtype=float)[None])[0, :2]
+        a1, a2 = ((T_ws.rotation.T @ np.asarray(a, dtype=float))[:2] for a in ell["axes"])
+        depth = ellipse_depth(cop, centre, (a1, a2))
+    else:
+        v_w = np.column_stack([P_c.vertices, np.zeros(P_c.n)]) @ T_wc.rotation.T + T_wc.translation
+        region = intersect(ConvexPolygon(_poly_in_plane(T_ws, v_w)[:, :2]), P_s)
+        if region is None:
+            return np.inf
+        depth = float(region.distance_inside(cop[None])[0])
+    return (margin - depth) * min(1.0, total / (COP_FULL_LOAD * weight))
+
+
+def ellipse_depth(
+    point: np.ndarray, centre: np.ndarray, axes: tuple[np.ndarray, np.ndarray], samples: int = 4096
+) -> float:
+    """How far [m] a point (2,) is inside the ellipse centre + a1·cos t + a2·sin t (< 0
+    outside): its depth in the polygon of ``samples`` boundary points, a lower bound short
+    by at most their chords' sagitta max(|a1|, |a2|)·(2π/samples)²/8 (< 1e-7 m below 0.3 m)."""
+    t = np.linspace(0.0, 2 * np.pi, samples, endpoint=False)
+    a1, a2 = axes
+    v = centre + np.outer(np.cos(t), a1) + np.outer(np.sin(t), a2)  # (samples, 2)
+    edge = np.roll(v, -1, axis=0) - v
+    cross = edge[:, 0] * (point[1] - v[:, 1]) - edge[:, 1] * (point[0] - v[:, 0])
+    turn = np.sign(a1[0] * a2[1] - a1[1] * a2[0])  # +1: counter-clockwise
+    return float(np.min(turn * cross / np.linalg.norm(edge, axis=1)))
 
 
 def read_json(path: str | Path, missing_fix: str, invalid_fix: str) -> Any:

@@ -1,0 +1,198 @@
+"""Every code block of the README runs as written.
+
+The fenced blocks are read from README.md at collection time, so a later edit of the README is
+tested without touching this file:
+
+- ``python``: run in order in one namespace (a later snippet uses an earlier one's variables),
+  in a temporary folder that holds the README's problem file as ``problem.yaml``;
+- ``yaml``: a problem file (it has ``contacts``) is loaded by ``pg.load_problem`` from that
+  ``problem.yaml``; a patch file (it has ``patches``) is loaded as the patches of the shipped
+  robot whose URDF has its frames; any other block is a fragment of a problem file, each of
+  its keys loaded as a problem file would (``robot``: ``load_robot``, relative paths under
+  ``NAME/`` being a copy of the shipped robot NAME's model folder);
+- ``json``: parsed;
+- ``sh``: the two set-up commands, which CI runs itself (``.ci/run``): not run here.
+
+A block of another language fails the test: decide how it is checked.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+import posturegen as pg
+from posturegen.robot import BUNDLED, load_bundled, load_robot
+
+README = Path(__file__).resolve().parent.parent / "README.md"
+CHECKED = {"python", "yaml", "json"}
+NOT_RUN = {"sh"}  # CI runs them, as the README says
+
+
+@dataclass(frozen=True)
+class Block:
+    """One fenced code block: its language, its text and its first line in the README."""
+
+    lang: str
+    code: str
+    line: int
+
+    @property
+    def id(self) -> str:
+        return f"{self.lang}-line{self.line}"
+
+
+def readme_blocks(text: str) -> list[Block]:
+    """The fenced blocks (```lang ... ```) of a Markdown text, in order."""
+    blocks, lang, start, lines = [], None, 0, []
+    for i, line in enumerate(text.splitlines(), start=1):
+        fence = re.match(r"^```\s*([\w+-]*)\s*$", line)
+        if fence is None:
+            if lang is not None:
+                lines.append(line)
+            continue
+        if lang is None:
+            lang, start, lines = fence.group(1) or "(none)", i + 1, []
+        else:
+            blocks.append(Block(lang, "\n".join(lines) + "\n", start))
+            lang = None
+    if lang is not None:
+        raise ValueError(f"README.md: the block opened at line {start - 1} is not closed")
+    return blocks
+
+
+BLOCKS = readme_blocks(README.read_text(encoding="utf-8"))
+PYTHON = [b for b in BLOCKS if b.lang == "python"]
+
+
+def _params(lang: str) -> list[Any]:
+    return [pytest.param(b, id=b.id) for b in BLOCKS if b.lang == lang]
+
+
+def _problem_block() -> Block:
+    """The README's problem file: the first YAML block with contacts."""
+    for b in BLOCKS:
+        if b.lang == "yaml" and isinstance(d := yaml.safe_load(b.code), dict) and "contacts" in d:
+            return b
+    raise AssertionError("README.md has no problem file (a yaml block with contacts)")
+
+
+def test_readme_has_the_blocks_it_promises():
+    langs = {b.lang for b in BLOCKS}
+    assert langs <= CHECKED | NOT_RUN, f"blocks of {langs - CHECKED - NOT_RUN}: check them here"
+    assert len(PYTHON) >= 2 and _problem_block() is not None
+    sh = [b for b in BLOCKS if b.lang == "sh"]
+    assert len(sh) == 1 and len(sh[0].code.strip().splitlines()) == 2  # the two commands
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory) -> Path:
+    """A folder with the README's problem file as problem.yaml."""
+    d = tmp_path_factory.mktemp("readme")
+    (d / "problem.yaml").write_text(_problem_block().code)
+    return d
+
+
+class PythonSession:
+    """The README's Python blocks run in order, once each, in one namespace."""
+
+    def __init__(self, cwd: Path) -> None:
+        self.cwd = cwd
+        self.namespace: dict[str, Any] = {"__name__": "__readme__"}
+        self.outcomes: dict[int, BaseException | None] = {}
+
+    def run_through(self, k: int, monkeypatch: pytest.MonkeyPatch) -> None:
+        """Run blocks 0..k that have not run (in ``cwd``); raise block k's exception."""
+        monkeypatch.chdir(self.cwd)
+        for i in range(k + 1):
+            if i not in self.outcomes:
+                try:
+                    exec(
+                        compile(PYTHON[i].code, f"README.md:{PYTHON[i].line}", "exec"),
+                        self.namespace,
+                    )
+                    self.outcomes[i] = None
+                except Exception as exc:  # noqa: BLE001 (reported by its own test)
+                    self.outcomes[i] = exc
+            if i < k and self.outcomes[i] is not None:
+                pytest.fail(f"the earlier block at README.md:{PYTHON[i].line} failed")
+        if (exc := self.outcomes[k]) is not None:
+            raise exc
+
+
+@pytest.fixture(scope="module")
+def session(workdir) -> PythonSession:
+    return PythonSession(workdir)
+
+
+@pytest.mark.parametrize("block", _params("python"))
+def test_python_block_runs(block, session, monkeypatch):
+    session.run_through(PYTHON.index(block), monkeypatch)
+    if block is PYTHON[0]:  # the first snippet solves the README's problem and writes it
+        assert session.namespace["result"].success
+        assert (session.cwd / "out" / "posture.json").is_file()
+
+
+def _copy_robot_models(root: Path, fragment: Any) -> None:
+    """For every relative path ``NAME/...`` or ``DIR/NAME/...`` in a fragment whose NAME is a
+    shipped robot: that robot's model folder copied to ``root/.../NAME``."""
+    paths = re.findall(r"[\w./-]+\.(?:urdf|srdf)", json.dumps(fragment))
+    for p in paths:
+        parts = Path(p).parts
+        for i, name in enumerate(parts[:-1]):
+            if name in BUNDLED and not (root / Path(*parts[: i + 1])).exists():
+                src = load_bundled(name).urdf.parent
+                shutil.copytree(src, root / Path(*parts[: i + 1]))
+
+
+def _robot_with_frames(frames: set[str]) -> str:
+    """The first shipped robot whose model has every frame."""
+    for name in BUNDLED:
+        model = load_bundled(name).model
+        if all(model.existFrame(f) for f in frames):
+            return name
+    raise AssertionError(f"no shipped robot has the frames {sorted(frames)}")
+
+
+@pytest.mark.parametrize("block", _params("yaml"))
+def test_yaml_block_loads(block, workdir, monkeypatch):
+    data = yaml.safe_load(block.code)
+    assert isinstance(data, dict), "a YAML block of the README is a mapping"
+    monkeypatch.chdir(workdir)
+    if "contacts" in data:  # a problem file
+        problem = pg.load_problem("problem.yaml" if block == _problem_block() else _write(block))
+        assert problem.summary()
+    elif "patches" in data:  # a patch file
+        frames = {p["frame"] for p in data["patches"].values()}
+        shipped = load_bundled(_robot_with_frames(frames))
+        path = _write(block, "patches.yaml")
+        robot = load_robot(
+            {"urdf": str(shipped.urdf), "srdf": str(shipped.srdf), "patches": str(path)}
+        )
+        assert set(robot.patches) == set(data["patches"])
+        if "initial" in data:
+            assert robot.q_init.shape == (robot.model.nq,)
+    else:  # a fragment of a problem file: each key as a problem file loads it
+        assert set(data) <= {"robot"}, f"fragment keys {set(data)}: check them here"
+        _copy_robot_models(workdir, data)
+        robot = load_robot(data["robot"], workdir)
+        assert robot.patches
+
+
+def _write(block: Block, name: str | None = None) -> Path:
+    path = Path(name or f"block-{block.line}.yaml")
+    path.write_text(block.code)
+    return path
+
+
+@pytest.mark.parametrize("block", _params("json"))
+def test_json_block_parses(block):
+    data = json.loads(block.code)
+    assert isinstance(data, dict | list)
