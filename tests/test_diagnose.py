@@ -15,7 +15,9 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from posturegen.active_set import ActiveSet
 from posturegen.cli import _demo_dir, main
+from posturegen.collision import CollisionTerm
 from posturegen.contacts import FrictionModel
 from posturegen.diagnose import Diagnosis, diagnose, from_rejection, required_mu
 from posturegen.elastic import Elastic, category
@@ -201,8 +203,12 @@ def test_elastic_program_derivatives_with_collision_rows():
     data = _problem({"options.self_collision": True})
     data["obstacles"] = [{"name": "box", "box": [0.3, 0.3, 0.3], "position": [0.5, 0.15, 0.9]}]
     problem = problem_from_dict(data)
-    solve(problem)  # sets the active collision rows
-    relaxed = dataclasses.replace(problem, elastic=Elastic())
+    active = ActiveSet.of(problem)  # rows: the self pairs near at q_init, 4 spheres per box
+    self_pairs = tuple(sorted(active.scan(problem.q_init, 0.002).near_self))
+    env_pairs = tuple((int(i), 0) for i in np.flatnonzero(active.allowed[:, 0])[:4])
+    assert self_pairs and env_pairs
+    term = CollisionTerm(active.pm, self_pairs, env_pairs, active.boxes, 0.002)
+    relaxed = dataclasses.replace(problem, elastic=Elastic(), collision_term=term)
     prog = relaxed._program()
     assert {"slack.collision.self", "slack.collision.env", "slack.torque_limits"} <= set(
         prog.x_index

@@ -21,7 +21,6 @@ import numpy as np
 import pinocchio as pin
 
 from .active_set import box_label
-from .collision import self_distances
 from .elastic import Elastic, slack_values
 from .kinematics import scratch_data
 from .solve import (
@@ -409,7 +408,7 @@ def _collision_causes(r: Relaxed) -> Iterator[Cause]:
         for k, (_, members) in enumerate(term.self_groups()):
             if s[k] > TOL_LENGTH:
                 pairs = np.array(members, dtype=int)
-                i, j = pairs[int(np.argmin(self_distances(pm, centers, pairs)))]
+                i, j = pairs[int(np.argmin(pm.distances(centers, pairs[:, 0], pairs[:, 1])))]
                 who = f"the proxies of {_link(model, pm, i)} and {_link(model, pm, j)}"
                 pen = _penalty(r, "collision.self", s[k : k + 1])
                 yield _collision_cause(who, "each other", float(s[k]), term.margin, pen)
