@@ -379,7 +379,7 @@ def test_box_rows_are_conservative_exact_near_and_saturated_far(talos):
     minus the radius, s = ENV_SATURATION): r >= 0 implies the sphere is at least the margin
     from the box, r is within the LSE bound of d - m near the box, and r is the constant s
     (zero gradient) once the sphere is far."""
-    from posturegen.collision import ENV_SATURATION, box_distances
+    from posturegen.collision import ENV_SATURATION, box_distances, row_box_distances
 
     data = copy.deepcopy(STAND)
     data["tasks"][0]["target"] = [0.45, -0.3, 0.75]
@@ -412,6 +412,13 @@ def test_box_rows_are_conservative_exact_near_and_saturated_far(talos):
         d = box_distances(term.pm, term.pm.centers_world(talos.model, pdata), term.boxes)
         d = d[sphere, box]  # max-face distance minus radius: a lower bound of the true one
         assert np.all(r <= d - margin + 1e-9)
+        # the active set's distances are the rows' own (up to the saturation, 1.2e-5 m at 2 cm)
+        d_row = row_box_distances(term.pm, term.pm.centers_world(talos.model, pdata), term.boxes)
+        d_row = d_row[sphere, box]
+        assert np.all(r <= d_row - margin + 1e-9)
+        np.testing.assert_allclose(
+            r[d_row - margin < 0.02], (d_row - margin)[d_row - margin < 0.02], atol=2e-5
+        )
         close = d - margin < 0.02
         # LSE of the faces: at most log(6)/β low; the saturation term adds e^(-β_min s) at most
         np.testing.assert_array_less(d[close] - margin - r[close], np.log(6.0) / BETA + 1e-6)

@@ -13,7 +13,8 @@ from posturegen.inspection import describe, initial_collision_term
 from posturegen.spec import problem_from_dict
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
-BOX = {"name": "box", "box": [0.2, 0.2, 0.2], "position": [0.45, -0.35, 0.6]}
+# 1.4 cm from the right hand's proxies at the initial posture: its sphere-box pairs are near
+BOX = {"name": "box", "box": [0.2, 0.2, 0.2], "position": [0.32, -0.35, 0.75]}
 solve_module = importlib.import_module("posturegen.solve")
 
 

@@ -250,3 +250,14 @@ def test_climb_verifies_every_stage(
         assert verify_file(tmp_path / stage["posture"]).ok, stage["name"]
         posture = json.loads((tmp_path / stage["posture"]).read_text())
         assert brute_force_intersections(posture) == [], stage["name"]
+
+
+def test_the_inclined_ladder_climbs_one_step(tmp_path: Path) -> None:
+    """`climb ladder-inclined` runs the demo's stages; more steps is a one-line error."""
+    from posturegen.scenes import scene
+
+    assert [s["name"] for s in scene("ladder-inclined", "hrp2", 1)["stages"]][-1] == (
+        "left foot on step 2"
+    )
+    with pytest.raises(InputError, match="--steps: the inclined ladder climbs one step"):
+        scene("ladder-inclined", "hrp2", 2)

@@ -19,10 +19,10 @@ import pinocchio as pin
 from .collision import (
     CollisionOptions,
     EnvBox,
-    box_distances,
     env_boxes,
     excluded_joint_ids,
     proxy_model,
+    row_box_distances,
 )
 from .kinematics import scratch_data
 from .proxies import ProxyModel, closest
@@ -117,7 +117,7 @@ class ActiveSet:
             )
             out.violated_self = closest(bad.take(~held), SELF_PER_LINK).tuples()
         if self.boxes:
-            d_env = np.where(self.allowed, box_distances(self.pm, centers, self.boxes), np.inf)
+            d_env = np.where(self.allowed, row_box_distances(self.pm, centers, self.boxes), np.inf)
             out.near_env = self._env(d_env, margin + self.options.environment_activation)
             fresh = np.where(self._held_env(), np.inf, d_env)
             out.violated_env = self._env(fresh, margin - TOL_VIOLATION)

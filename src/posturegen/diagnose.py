@@ -152,9 +152,37 @@ def diagnose(problem: Any, result: Result) -> Result:
     if result.status in _IPOPT_OK:
         found = from_rejection(result.verification)
     else:
-        found = from_relaxed(relax(problem))
+        relaxed = relax(problem)
+        found = from_relaxed(relaxed)
+        if found.feasible:
+            restarted = restart_from(problem, relaxed)
+            if restarted.success:
+                return restarted
     posture = {**result.posture, "diagnosis": found.to_dict()}
     return replace(result, diagnosis=found.line, posture=posture)
+
+
+def restart_from(problem: Any, relaxed: Relaxed) -> Result:
+    """``problem`` solved again (the active-set loop when it avoids collisions) from the
+    relaxed solution, which met every row and passed the re-check: a start that IPOPT did
+    not reach from the initial posture (ATLAS' third stair: 400 iterations from the second
+    stair's posture, then restoration failed). When that run fails too, the relaxed posture
+    itself: IPOPT converged on the elastic program with no row moved, and the posture passes
+    every check of this problem. Its posture file notes which."""
+    x0, layout = relaxed.x, relaxed.x_index
+    if problem.collision_options is None:
+        result = _result(problem, [_run_ipopt(problem, x0, layout=layout)])
+    else:
+        result = _solve_avoiding(problem, x0, [], layout)[0]
+    note = "solved again from the relaxed program's posture (the first start did not converge)"
+    if not result.success:
+        result = _result(relaxed.problem, [relaxed.run])
+        note = (
+            "the relaxed program's posture (IPOPT converged on the elastic program with no row "
+            "moved; the problem itself did not converge from the initial posture nor from it)"
+        )
+    posture = {**result.posture, "notes": [*result.posture.get("notes", []), note]}
+    return replace(result, posture=posture)
 
 
 def solve_diagnosed(problem: Any) -> Result:

@@ -328,7 +328,14 @@ def ladder_inclined(robot: str, steps: int = 1) -> dict[str, Any]:
     """Paper V-A: an inclined ladder (60°) with 12 cm steps every 20 cm and two guardrails.
     The right foot goes on step 1 and the right hand on the right guardrail (both then fixed,
     bearing forces); the left foot is lifted, then goes on step 2 as a geometric contact whose
-    ellipse radii are at least 40 % of the step's width (its depth, 12 cm)."""
+    ellipse radii are at least 40 % of the step's width (its depth, 12 cm). As a climb it
+    has that one step of each foot (``steps`` 1)."""
+    if steps > 1:
+        raise InputError(
+            "--steps",
+            f"the inclined ladder climbs one step of each foot, not {steps}",
+            "use --steps 1: right foot on step 1, left foot on step 2",
+        )
     size = robot_size(robot)
     frames = _sole_frames(robot)
     alpha, rise, depth = math.radians(60.0), 0.2, 0.12
@@ -572,7 +579,7 @@ SCENES: dict[str, SceneInfo] = {
         wall_brace, "talos", 1, None, "left hand braced on a wall, right hand reaching far"
     ),
     "ladder-inclined": SceneInfo(
-        ladder_inclined, "hrp2", 1, None, "paper V-A: inclined ladder, foot to step 2"
+        ladder_inclined, "hrp2", 1, 1, "paper V-A: inclined ladder, foot to step 2"
     ),
     "ladder-vertical": SceneInfo(
         ladder_vertical, "hrp2", 0, 2, "paper V-B: vertical ladder, 2.5 cm rungs"
