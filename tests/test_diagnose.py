@@ -19,7 +19,14 @@ from posturegen.active_set import ActiveSet
 from posturegen.cli import _demo_dir, main
 from posturegen.collision import CollisionTerm
 from posturegen.contacts import FrictionModel
-from posturegen.diagnose import Diagnosis, diagnose, from_rejection, required_mu
+from posturegen.diagnose import (
+    Diagnosis,
+    diagnose,
+    from_rejection,
+    from_relaxed,
+    relax,
+    required_mu,
+)
 from posturegen.elastic import Elastic, category
 from posturegen.errors import ImplausibleValueWarning
 from posturegen.solve import solve
@@ -144,10 +151,23 @@ def test_self_collision_only():
 
 def test_a_feasible_problem_is_said_feasible():
     """IPOPT stopped by max_iter: the relaxed program meets every row."""
-    data = _problem({"options.solver": {"max_iter": 3}})
-    result, d = _diagnose(data)
-    assert d["feasible"] and d["causes"] == []
-    assert result.diagnosis.startswith("no constraint blocks it")
+    problem = problem_from_dict(_problem({"options.solver": {"max_iter": 3}}))
+    found = from_relaxed(relax(problem))
+    assert found.feasible and found.causes == ()
+    assert found.line.startswith("no constraint blocks it")
+
+
+def test_diagnose_returns_the_posture_a_feasible_relaxed_program_found():
+    """The same problem through diagnose: solved again from the relaxed posture (3 iterations
+    are not enough), so the relaxed posture itself, which passes every check; its notes say
+    so and the file verifies."""
+    problem = problem_from_dict(_problem({"options.solver": {"max_iter": 3}}))
+    first = solve(problem)
+    assert not first.success
+    result = diagnose(problem, first)
+    assert result.success and result.verification.ok
+    assert any("relaxed program" in n for n in result.posture["notes"])
+    assert result.posture["diagnosis"] is None
 
 
 def test_diagnosis_leaves_the_problem_as_it_was():
