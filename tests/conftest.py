@@ -12,7 +12,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from posturegen.robot import load_bundled, shipped_models_dir
+from posturegen.model.robot import load_bundled, shipped_models_dir
 
 # Solvers run CasADi's virtual machine in the tests (no background compilation of every reused
 # structure into ~/.cache); tests/test_codegen.py sets its modes explicitly.

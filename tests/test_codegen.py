@@ -18,9 +18,10 @@ import numpy as np
 import pytest
 import yaml
 
-from posturegen import _lifeline, codegen, problem_from_dict, solve
+from posturegen import problem_from_dict, solve
 from posturegen.cli import _demo_dir
-from posturegen.problem import _CACHE
+from posturegen.solver import _lifeline, codegen
+from posturegen.solver.problem import _CACHE
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
 needs_cc = pytest.mark.skipif(codegen.compiler() is None, reason="no C compiler")
@@ -73,7 +74,7 @@ def test_library_key_covers_the_compiler_flags(monkeypatch):
 def test_library_key_covers_the_code_of_hand_built_derivatives(monkeypatch):
     """Programs with BlockDerivatives add the package's source digest to their key (their
     derivative functions are built only for a solver made from the expressions)."""
-    from posturegen import problem as P
+    from posturegen.solver import problem as P
 
     plain = _problem("off")._program()
     assert plain.derivative_key == "" and plain.derivative_functions == {}
@@ -181,9 +182,9 @@ def test_prune_keeps_the_most_recently_used_libraries(tmp_path, monkeypatch):
 # ----------------------------------------------------------------- compilers die with us
 CHILD = """
 import json, os, sys, time, uuid
-from posturegen import _lifeline, codegen
+from posturegen.solver import _lifeline, codegen
 from posturegen.cli import _demo_dir
-from posturegen.spec import load_problem
+from posturegen.io.problem_file import load_problem
 
 codegen.HOT_FLAGS = ("-O2",)  # the Hessian then compiles for minutes: it cannot end first
 compiled = load_problem(_demo_dir() / "stand-reach.yaml").compile()

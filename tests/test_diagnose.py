@@ -1,4 +1,5 @@
-"""The diagnosis of a failure (posturegen.elastic, posturegen.diagnose): each cause on a
+"""The diagnosis of a failure (posturegen.terms.elastic, posturegen.solver.diagnose): each cause on
+a
 problem built to have it, its amount checked against the problem, and the elastic program's
 derivatives."""
 
@@ -15,15 +16,15 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from posturegen.active_set import ActiveSet
 from posturegen.cli import _demo_dir, main
-from posturegen.collision import CollisionTerm
-from posturegen.contacts import FrictionModel
-from posturegen.diagnose import Diagnosis, diagnose, from_rejection, required_mu
-from posturegen.elastic import Elastic, category
+from posturegen.collision.active_set import ActiveSet
+from posturegen.collision.rows import CollisionTerm
 from posturegen.errors import ImplausibleValueWarning
-from posturegen.solve import solve
-from posturegen.spec import problem_from_dict
+from posturegen.io.problem_file import problem_from_dict
+from posturegen.solver.diagnose import Diagnosis, diagnose, from_rejection, required_mu
+from posturegen.solver.solve import solve
+from posturegen.terms.contacts import FrictionModel
+from posturegen.terms.elastic import Elastic, category
 from posturegen.verify import Check, VerifyReport
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
@@ -262,7 +263,7 @@ def test_cli_prints_the_diagnosis_as_one_line_on_stderr(tmp_path, capsys):
 
 
 def test_climb_stage_failure_is_diagnosed(tmp_path):
-    from posturegen.sequence import run_sequence
+    from posturegen.climb.sequence import run_sequence
 
     stage = {k: STAND[k] for k in ("contacts", "tasks")}
     far = copy.deepcopy(stage)

@@ -1,4 +1,5 @@
-"""Tests of posturegen.geometry: polygons, intersection, ellipse constraints, largest ellipse."""
+"""Tests of posturegen.model.geometry: polygons, intersection, ellipse constraints, largest
+ellipse."""
 
 from __future__ import annotations
 
@@ -11,9 +12,9 @@ import shapely
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import posturegen.geometry as geo
+import posturegen.model.geometry as geo
 from posturegen.errors import InputError, PosturegenError
-from posturegen.geometry import (
+from posturegen.model.geometry import (
     ConvexPolygon,
     Ellipse,
     ellipse_edge_constraints_paper,

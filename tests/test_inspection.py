@@ -9,12 +9,12 @@ import re
 import yaml
 
 from posturegen.cli import _demo_dir, main
-from posturegen.inspection import describe, initial_collision_term
-from posturegen.spec import problem_from_dict
+from posturegen.io.problem_file import problem_from_dict
+from posturegen.solver.inspection import describe, initial_collision_term
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
 BOX = {"name": "box", "box": [0.2, 0.2, 0.2], "position": [0.45, -0.35, 0.6]}
-solve_module = importlib.import_module("posturegen.solve")
+solve_module = importlib.import_module("posturegen.solver.solve")
 
 
 def _with(obstacles: list, self_collision: bool = False) -> dict:

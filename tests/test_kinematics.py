@@ -7,13 +7,13 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from posturegen.kinematics import CasadiKinematics, so3_exp
+from posturegen.model.kinematics import CasadiKinematics, so3_exp
 
 TOL = 1e-9
 
 
 def _models():
-    from posturegen.robot import load_bundled
+    from posturegen.model.robot import load_bundled
 
     return {name: load_bundled(name).model for name in ("talos", "hrp2", "atlas")}
 

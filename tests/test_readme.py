@@ -29,7 +29,7 @@ import pytest
 import yaml
 
 import posturegen as pg
-from posturegen.robot import BUNDLED, load_bundled, load_robot
+from posturegen.model.robot import BUNDLED, load_bundled, load_robot
 
 README = Path(__file__).resolve().parent.parent / "README.md"
 CHECKED = {"python", "yaml", "json"}

@@ -198,7 +198,7 @@ def test_cli_inspect_lists_the_program(capsys):
 def test_posture_reference_is_put_inside_the_limits(lo, width, t):
     """A reference on or past a limit moves min(REFERENCE_INSET, range/4) inside it; one
     already that far inside is kept."""
-    from posturegen.costs import REFERENCE_INSET, reference_inside_limits
+    from posturegen.terms.costs import REFERENCE_INSET, reference_inside_limits
 
     hi = lo + width
     q0 = np.array([lo + t * width])
@@ -213,7 +213,7 @@ def test_a_reference_on_a_limit_no_longer_slows_ipopt_down(monkeypatch):
     """Talos' grippers sit on their upper limit in half-sitting: with the posture reference
     there, the optimum is a degenerate active bound and IPOPT's steps halve each iteration; a
     reference 1 cm inside converges quadratically (12 instead of 16 iterations here)."""
-    import posturegen.costs as costs
+    import posturegen.terms.costs as costs
 
     runs = {}
     for inset in (0.0, costs.REFERENCE_INSET):
@@ -232,7 +232,7 @@ def test_a_run_that_does_not_converge_restarts_from_the_torque_relaxed_solution(
     ×TORQUE_CONTINUATION, and the real one again from that solution; every run counts."""
     import sys
 
-    solve_module = sys.modules["posturegen.solve"]
+    solve_module = sys.modules["posturegen.solver.solve"]
     calls: list[tuple[float, bool]] = []
     step = first_run_stops_early(
         solve_module._solve_continued,

@@ -18,10 +18,10 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .problem import Problem
-from .robot import load_bundled
-from .solve import solve
-from .spec import problem_from_dict
+from .io.problem_file import problem_from_dict
+from .model.robot import load_bundled
+from .solver.problem import Problem
+from .solver.solve import solve
 
 
 @dataclass(frozen=True)
@@ -350,7 +350,7 @@ class _FamilyRun:
     that two families can be interleaved; :meth:`report` collects the statistics."""
 
     def __init__(self, name: str, n: int, seed: int, jit: bool) -> None:
-        from . import codegen
+        from .solver import codegen
 
         self.name, self.n = name, n
         self.description, generator = FAMILIES[name]
@@ -386,7 +386,7 @@ class _FamilyRun:
             self.failures.append(f"#{i}: {result.message}")
 
     def report(self) -> FamilyReport:
-        from . import codegen
+        from .solver import codegen
 
         ms = [1e3 * t for t in self.times]
         compiled = self.compiled
@@ -417,7 +417,8 @@ class _FamilyRun:
 
 def run_family(name: str, n: int = 100, seed: int = 0, jit: bool = False) -> FamilyReport:
     """Solve n seeded problems of a family and collect statistics. ``jit``: generated C
-    (posturegen.codegen, mode ``sync``: a structure's library is loaded from the disk cache or
+    (posturegen.solver.codegen, mode ``sync``: a structure's library is loaded from the disk cache
+    or
     compiled before its first solve); else CasADi's virtual machine (mode ``off``), so that
     the numbers do not depend on when a background build ends."""
     family = _FamilyRun(name, n, seed, jit)

@@ -35,8 +35,8 @@ def demo_names() -> list[str]:
 
 
 def _solve_to(problem_path: Path, out: Path, quiet: bool = False, png: str | None = None) -> int:
-    from .diagnose import solve_diagnosed
-    from .spec import load_problem
+    from .io.problem_file import load_problem
+    from .solver.diagnose import solve_diagnosed
 
     result = solve_diagnosed(load_problem(problem_path))
     path = result.write(out / "posture.json")
@@ -78,8 +78,8 @@ def cmd_batch(args: argparse.Namespace) -> int:
 
 def cmd_inspect(args: argparse.Namespace) -> int:
     """posturegen inspect PROBLEM.yaml: the program's variables, constraints and costs."""
-    from .inspection import describe
-    from .spec import load_problem
+    from .io.problem_file import load_problem
+    from .solver.inspection import describe
 
     print(describe(load_problem(Path(args.problem))))
     return EXIT_OK
@@ -97,8 +97,8 @@ def cmd_verify(args: argparse.Namespace) -> int:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """posturegen demo --list | posturegen demo NAME --out DIR [--robot NAME]"""
-    from .scenes import SCENES, scene
-    from .spec import read_yaml
+    from .climb.scenes import SCENES, scene
+    from .io.problem_file import read_yaml
 
     names = demo_names()
     if args.list or args.name is None:
@@ -124,7 +124,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 def cmd_climb(args: argparse.Namespace) -> int:
     """posturegen climb SCENE --robot NAME --steps K --out DIR"""
-    from .scenes import SCENES, scene
+    from .climb.scenes import SCENES, scene
 
     climbs = [n for n, info in SCENES.items() if info.climb_steps is not None]
     if args.scene not in climbs:
@@ -143,7 +143,7 @@ def _run_sequence(seq: dict, out: Path, quiet: bool, png: str | None, final: boo
     import shutil
     import time
 
-    from .sequence import StageReport, run_sequence
+    from .climb.sequence import StageReport, run_sequence
 
     robot = seq["robot"] if isinstance(seq["robot"], str) else seq["robot"].get("name")
     t_start = time.perf_counter()

@@ -1,7 +1,7 @@
 """Independent numeric re-check of a posture with Pinocchio (never with the solver's CasADi).
 
 It reads only the posture's public content (the posture-file dict), so ``posturegen verify
-FILE`` and :func:`posturegen.solve.solve` run exactly the same checks:
+FILE`` and :func:`posturegen.solver.solve.solve` run exactly the same checks:
 
 - q: right size, finite, unit base quaternion, within joint limits;
 - torques within effort limits, and the static equilibrium ``[0; τ] + Σ J_iᵀ f_i - g(q) = 0``
@@ -24,13 +24,13 @@ import numpy as np
 import pinocchio as pin
 
 from .checks import Check, VerifyReport
+from .collision.mesh_check import mesh_collision_checks
 from .errors import InputError
-from .geometry import ConvexPolygon, Ellipse, intersect
-from .kinematics import scratch_data
-from .mesh_check import mesh_collision_checks
+from .model.geometry import ConvexPolygon, Ellipse, intersect
+from .model.kinematics import scratch_data
 
 SCHEMA = "posturegen.posture/1"
-SEQUENCE_SCHEMA = "posturegen.sequence/1"  # climbs: see posturegen.sequence
+SEQUENCE_SCHEMA = "posturegen.sequence/1"  # climbs: see posturegen.climb.sequence
 
 # Tolerances of the re-check. Lengths [m], angles [rad], forces relative to the weight.
 TOL_JOINT = 1e-6  # [rad] or [m]
