@@ -21,7 +21,7 @@ import yaml
 from posturegen import problem_from_dict, solve
 from posturegen.cli import _demo_dir
 from posturegen.solver import _lifeline, codegen
-from posturegen.solver.problem import _CACHE
+from posturegen.solver.compile import _CACHE, symbolic
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
 needs_cc = pytest.mark.skipif(codegen.compiler() is None, reason="no C compiler")
@@ -41,16 +41,15 @@ def _problem(mode: str, target: list[float] | None = None, torque_cost: bool = F
 
 @pytest.fixture(scope="module")
 def cache(tmp_path_factory):
-    """A fresh library cache for this module; the in-memory solver cache restored after."""
+    """A fresh library cache for this module; the in-memory solver cache emptied before and
+    after."""
     mp = pytest.MonkeyPatch()
     path = tmp_path_factory.mktemp("cache")
     mp.setenv("POSTUREGEN_CACHE", str(path))
-    saved = dict(_CACHE)
     _CACHE.clear()
     yield path
     codegen.wait()
     _CACHE.clear()
-    _CACHE.update(saved)
     mp.undo()
 
 
@@ -74,9 +73,9 @@ def test_library_key_covers_the_compiler_flags(monkeypatch):
 def test_library_key_covers_the_code_of_hand_built_derivatives(monkeypatch):
     """Programs with BlockDerivatives add the package's source digest to their key (their
     derivative functions are built only for a solver made from the expressions)."""
-    from posturegen.solver import problem as P
+    from posturegen.solver import compile as P
 
-    plain = _problem("off")._program()
+    plain = symbolic(_problem("off"))
     assert plain.derivative_key == "" and plain.derivative_functions == {}
     nlp = plain.function
     key = codegen.library_key(nlp, "abc")

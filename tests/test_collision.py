@@ -4,6 +4,7 @@ gradients, and postures that collide without the rows do not with them (coal on 
 from __future__ import annotations
 
 import copy
+import sys
 
 import casadi as ca
 import numpy as np
@@ -22,6 +23,8 @@ from posturegen.collision.rows import BETA
 from posturegen.collision.surface import refine, surface_of
 from posturegen.errors import InputError
 from posturegen.model.robot import load_robot
+from posturegen.solver import compile as compile_module
+from posturegen.solver.problem import Program
 from tests.conftest import first_run_stops_early
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
@@ -164,6 +167,14 @@ def test_proxies_are_cached_on_disk(tmp_path, monkeypatch):
     assert [s.excess for s in second.spheres] == pytest.approx([s.excess for s in first.spheres])
 
 
+def _solved_with_rows(problem):
+    """The Result of solving ``problem`` and what its last IPOPT run solved (the problem with
+    its last collision rows, a :class:`posturegen.solver.problem.Program`)."""
+    solve_module = sys.modules["posturegen.solver.solve"]
+    result, runs = solve_module._solve_continued(Program.of(problem), None, [])
+    return result, runs[-1].program
+
+
 def _fd(fun, x, h=1e-6):
     return np.array([(fun(x + h * e) - fun(x - h * e)) / (2 * h) for e in np.eye(len(x))]).T
 
@@ -173,8 +184,7 @@ def test_distance_gradients_match_finite_differences():
     data = copy.deepcopy(STAND)
     data["options"]["self_collision"] = True
     data["obstacles"] = [{"name": "box", "box": [0.3, 0.3, 0.3], "position": [0.45, -0.12, 0.9]}]
-    problem = problem_from_dict(data)
-    result = solve(problem)  # sets the active collision rows
+    result, problem = _solved_with_rows(problem_from_dict(data))
     compiled = problem.compile()
     assert {"collision.self", "collision.env"} <= set(compiled.g_index)
     x0, p, _, _ = problem.numeric(compiled)
@@ -201,12 +211,9 @@ def test_hand_built_derivatives_match_casadi_and_finite_differences():
     data = copy.deepcopy(STAND)
     data["options"]["self_collision"] = True
     data["obstacles"] = [{"name": "box", "box": [0.3, 0.3, 0.3], "position": [0.45, -0.12, 0.9]}]
-    problem = problem_from_dict(data)
-    solve(problem)  # sets the active collision rows
-    from posturegen.solver import problem as problem_module
-
-    problem_module._PROGRAMS.clear()
-    prog = problem._program()
+    _, problem = _solved_with_rows(problem_from_dict(data))
+    compile_module._PROGRAMS.clear()
+    prog = compile_module.symbolic(problem)
     assert prog._derivatives is None  # built on first use: a solver made from the expressions
     compiled = problem.compile()
     assert set(prog.derivative_functions) == {"jac_g", "hess_lag"} and prog.derivative_key
@@ -384,8 +391,7 @@ def test_box_rows_are_conservative_exact_near_and_saturated_far(talos):
     data = copy.deepcopy(STAND)
     data["tasks"][0]["target"] = [0.45, -0.3, 0.75]
     data["obstacles"] = [{"name": "box", "box": [0.2, 0.2, 0.2], "position": [0.45, -0.3, 0.95]}]
-    problem = problem_from_dict(data)
-    result = solve(problem)
+    result, problem = _solved_with_rows(problem_from_dict(data))
     assert result.success, result.message
     term = problem.collision_term
     compiled = problem.compile()
@@ -569,7 +575,7 @@ def test_the_separated_start_parts_pressed_pairs_and_keeps_the_supports(talos):
 
 def test_collision_runs_start_ipopt_with_their_barrier_and_regularization(monkeypatch):
     """The active-set runs use COLLISION_MU_INIT and COLLISION_PERTURBATION (IPOPT's options
-    carry them), the problem's own options are restored afterwards."""
+    carry them), the problem's own options are never written."""
     import sys
 
     solve_module = sys.modules["posturegen.solver.solve"]

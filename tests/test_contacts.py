@@ -13,7 +13,8 @@ import pytest
 from posturegen import problem_from_dict, solve
 from posturegen.climb.stance import next_problem
 from posturegen.errors import InputError
-from posturegen.model.geometry import Ellipse, intersect, largest_inscribed_ellipse
+from posturegen.model.ellipse_fit import largest_inscribed_ellipse
+from posturegen.model.geometry import Ellipse, intersect
 from posturegen.terms.contacts import patch_in_surface, polygon_in_surface
 from posturegen.terms.cop import DEFAULT_COP_MARGIN
 from posturegen.terms.friction import FrictionModel

@@ -128,7 +128,8 @@ def test_lagrangian_hessian(program):
 def test_block_derivatives_are_checked_when_declared():
     """A block's own derivatives must have its shape and be taken w.r.t. variables."""
     from posturegen.errors import SolveError
-    from posturegen.solver.problem import NLP, BlockDerivatives, _columns
+    from posturegen.solver.compile import _columns
+    from posturegen.terms.nlp import NLP, BlockDerivatives
 
     nlp = NLP()
     x = nlp.variable("x", 3)

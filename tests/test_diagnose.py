@@ -21,7 +21,9 @@ from posturegen.collision.active_set import ActiveSet
 from posturegen.collision.rows import CollisionTerm
 from posturegen.errors import ImplausibleValueWarning
 from posturegen.io.problem_file import problem_from_dict
+from posturegen.solver.compile import symbolic
 from posturegen.solver.diagnose import Diagnosis, diagnose, from_rejection, required_mu
+from posturegen.solver.problem import Program
 from posturegen.solver.solve import solve
 from posturegen.terms.contacts import FrictionModel
 from posturegen.terms.elastic import Elastic, category
@@ -209,8 +211,8 @@ def test_elastic_program_derivatives_with_collision_rows():
     env_pairs = tuple((int(i), 0) for i in np.flatnonzero(active.allowed[:, 0])[:4])
     assert self_pairs and env_pairs
     term = CollisionTerm(active.pm, self_pairs, env_pairs, active.boxes, 0.002)
-    relaxed = dataclasses.replace(problem, elastic=Elastic(), collision_term=term)
-    prog = relaxed._program()
+    relaxed = Program.of(dataclasses.replace(problem, elastic=Elastic()), collision_term=term)
+    prog = symbolic(relaxed)
     assert {"slack.collision.self", "slack.collision.env", "slack.torque_limits"} <= set(
         prog.x_index
     )

@@ -8,6 +8,7 @@ import re
 
 import yaml
 
+from posturegen._cache import BoundedCache
 from posturegen.cli import _demo_dir, main
 from posturegen.io.problem_file import problem_from_dict
 from posturegen.solver.inspection import describe, initial_collision_term
@@ -51,7 +52,9 @@ def test_the_rows_shown_are_those_of_the_first_ipopt_run(monkeypatch):
     data = _with([BOX], self_collision=True)
     problem = problem_from_dict(data)
     shown = _rows(describe(problem))
-    monkeypatch.setattr(solve_module, "_LEARNED", {})  # no pairs from earlier solves
+    monkeypatch.setattr(
+        solve_module, "_LEARNED", BoundedCache("learned", 64)
+    )  # no pairs from earlier solves
     first: list[dict[str, int]] = []
     real = solve_module._run_ipopt
 

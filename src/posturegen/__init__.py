@@ -9,6 +9,7 @@ contacts (Brossette et al., IROS 2014).
 """
 
 from . import _threads  # noqa: F401  (first: before numpy loads OpenBLAS)
+from ._cache import clear_caches
 from .batch import BatchError, solve_many
 from .errors import (
     ImplausibleValueWarning,
@@ -42,6 +43,7 @@ __all__ = [
     "SolverOptions",
     "Surface",
     "VerifyReport",
+    "clear_caches",
     "diagnose",
     "load_problem",
     "load_robot",

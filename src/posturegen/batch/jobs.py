@@ -126,12 +126,9 @@ class _ProblemPickler(pickle.Pickler):
 
 
 def pack_problem(problem: Problem) -> bytes:
-    """A Problem as bytes for a worker (its robot by name, without the collision rows of its
-    last solve, which solve() rebuilds)."""
+    """A Problem as bytes for a worker (its robot by name)."""
     buffer = io.BytesIO()
-    _ProblemPickler(buffer, protocol=pickle.HIGHEST_PROTOCOL).dump(
-        dataclasses.replace(problem, collision_term=None)
-    )
+    _ProblemPickler(buffer, protocol=pickle.HIGHEST_PROTOCOL).dump(problem)
     return buffer.getvalue()
 
 

@@ -21,7 +21,7 @@ from typing import Any
 
 from ..errors import InputError, PosturegenError, PosturegenWarning
 from ..io.problem_file import problem_from_dict
-from ..solver import problem as problem_module
+from ..solver import compile as compile_module
 from ..solver.diagnose import diagnose as diagnose_result
 from ..solver.solve import Result, solve
 from .jobs import ERROR, INPUT_ERROR, BatchError, BatchItem, Job, read_file
@@ -91,7 +91,7 @@ class WorkerInfo:
 
 def worker_info() -> WorkerInfo:
     """This process's WorkerInfo."""
-    return WorkerInfo(worker_name(), len(problem_module._CACHE), blas_threads())
+    return WorkerInfo(worker_name(), len(compile_module._CACHE), blas_threads())
 
 
 _GET_THREADS = ("openblas_get_num_threads", "scipy_openblas_get_num_threads64_")

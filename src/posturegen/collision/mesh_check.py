@@ -15,6 +15,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
+from .._cache import BoundedCache, Ref
 from ..checks import Check
 from ..errors import InputError
 from ..model.kinematics import scratch_data
@@ -27,10 +28,10 @@ MIN_DEPTH = 1e-6  # [m] an intersection counts at least this deep (the hulls' EP
 
 # geometry models of the self-collision check (the pairs that pairs.pair_rule leaves
 # checked, minus the user's) and their data, per (model, geometry, SRDF, user pairs); the
-# model and geometry objects are held so that their ids stay theirs
-_SELF_PAIRS: dict[
-    tuple[Any, ...], tuple[pin.Model, pin.GeometryModel, pin.GeometryModel, pin.GeometryData]
-] = {}
+# model and geometry objects are held (Ref)
+_SELF_PAIRS: BoundedCache[tuple[pin.GeometryModel, pin.GeometryData]] = BoundedCache(
+    "self-collision check models", 16
+)
 
 
 def _self_pairs_model(
@@ -41,41 +42,34 @@ def _self_pairs_model(
 ) -> tuple[pin.GeometryModel, pin.GeometryData]:
     """``geometry`` with the collision pairs to check (:meth:`PairRule.checked_geometry_pairs`)
     and a data for it, built once per arguments (each check overwrites its results)."""
-    key = (id(model), id(geometry), srdf, user)
+    key = (Ref(model), Ref(geometry), srdf, user)
     hit = _SELF_PAIRS.get(key)
-    if hit is not None and hit[0] is model and hit[1] is geometry:
-        return hit[2], hit[3]
+    if hit is not None:
+        return hit
     gm = geometry.copy()
     gm.removeAllCollisionPairs()
     for i, j in pair_rule(model, geometry, srdf).checked_geometry_pairs(geometry, user):
         gm.addCollisionPair(pin.CollisionPair(i, j))
-    if len(_SELF_PAIRS) >= 16:
-        _SELF_PAIRS.clear()
-    gd = gm.createData()
-    _SELF_PAIRS[key] = (model, geometry, gm, gd)
-    return gm, gd
+    return _SELF_PAIRS.put(key, (gm, gm.createData()))
 
 
 # per geometry model: each object's bounding sphere (centre in its joint's frame, radius) [m]
-_BOUNDS: dict[int, tuple[pin.GeometryModel, np.ndarray, np.ndarray]] = {}
+_BOUNDS: BoundedCache[tuple[np.ndarray, np.ndarray]] = BoundedCache("bounding spheres", 16)
 
 
 def _bounding_spheres(geometry: pin.GeometryModel) -> tuple[np.ndarray, np.ndarray]:
     """(k, 3) centres in the parent joints' frames and (k,) radii of spheres that contain
     each collision object (its vertices' hull: the centroid and the farthest vertex)."""
-    hit = _BOUNDS.get(id(geometry))
-    if hit is not None and hit[0] is geometry:
-        return hit[1], hit[2]
+    hit = _BOUNDS.get(Ref(geometry))
+    if hit is not None:
+        return hit
     centres, radii = [], []
     for obj in geometry.geometryObjects:
         pts = hull_points(obj)
         c = pts.mean(axis=0)
         centres.append(c)
         radii.append(float(np.linalg.norm(pts - c, axis=1).max()))
-    if len(_BOUNDS) >= 16:
-        _BOUNDS.clear()
-    _BOUNDS[id(geometry)] = (geometry, np.array(centres).reshape(-1, 3), np.array(radii))
-    return _BOUNDS[id(geometry)][1], _BOUNDS[id(geometry)][2]
+    return _BOUNDS.put(Ref(geometry), (np.array(centres).reshape(-1, 3), np.array(radii)))
 
 
 def user_pairs(posture: dict[str, Any], model: pin.Model) -> frozenset[tuple[int, int]]:

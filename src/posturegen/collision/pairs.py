@@ -27,6 +27,8 @@ import coal
 import numpy as np
 import pinocchio as pin
 
+from .._cache import BoundedCache, Ref
+
 REASONS = ("adjacent", "srdf", "reference_overlap", "user")
 REFERENCE_NAME = "half_sitting"  # the SRDF posture that is the reference, when there is one
 
@@ -85,16 +87,16 @@ class PairRule:
         return out
 
 
-# pair_rule per (model, geometry, SRDF); the model and geometry are held: their ids stay theirs
-_RULES: dict[tuple[Any, ...], tuple[pin.Model, pin.GeometryModel, PairRule]] = {}
+# pair_rule per (model, geometry, SRDF); the model and geometry are held (Ref)
+_RULES: BoundedCache[PairRule] = BoundedCache("pair rules", 16)
 
 
 def pair_rule(model: pin.Model, geometry: pin.GeometryModel, srdf: str | None) -> PairRule:
     """The unchecked joint pairs of a robot and their reasons (see the module doc)."""
-    key = (id(model), id(geometry), str(srdf) if srdf else None)
+    key = (Ref(model), Ref(geometry), str(srdf) if srdf else None)
     hit = _RULES.get(key)
-    if hit is not None and hit[0] is model and hit[1] is geometry:
-        return hit[2]
+    if hit is not None:
+        return hit
     parent = [int(o.parentJoint) for o in geometry.geometryObjects]
     disabled = _srdf_disabled(model, geometry, srdf)
     by_joints: dict[tuple[int, int], list[tuple[int, int]]] = {}
@@ -114,10 +116,7 @@ def pair_rule(model: pin.Model, geometry: pin.GeometryModel, srdf: str | None) -
     for i, j in overlapping:
         unchecked.setdefault(joint_pair(parent[i], parent[j]), "reference_overlap")
     rule = PairRule(unchecked, frozenset(disabled), q_ref)
-    if len(_RULES) >= 16:
-        _RULES.clear()
-    _RULES[key] = (model, geometry, rule)
-    return rule
+    return _RULES.put(key, rule)
 
 
 def _srdf_disabled(

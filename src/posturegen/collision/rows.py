@@ -46,10 +46,11 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
+from .._cache import BoundedCache, Ref
 from ..errors import InputError
 from ..model.kinematics import skew
 from ..model.robot import Robot
-from ..solver.problem import BlockDerivatives, BuildContext, Problem, Term
+from ..terms.nlp import BlockDerivatives, BuildContext, Instance, Term
 from .proxies import SLIDE, ProxyModel, closest, proxy_model
 from .proxy_fit import Sphere
 
@@ -103,7 +104,7 @@ class EnvBox:
         }
 
 
-def env_boxes(problem: Problem) -> list[EnvBox]:
+def env_boxes(problem: Instance) -> list[EnvBox]:
     """The scene's obstacles, and its support surfaces as boxes under their bounding
     rectangle (``Surface.thickness`` deep), which the joints of the patches in contact with
     them may touch (none when the problem avoids self-collisions only)."""
@@ -189,7 +190,7 @@ def separated_start(
     talos-near-body-collision took 26.5 and 24.5 median iterations (two seeds), 25.0 and 23.5
     from the separated start, 22.5 and 21.0 with it and COLLISION_MU_INIT = 1e-3."""
     key = (
-        id(robot.model),
+        Ref(robot.model),
         np.asarray(q, dtype=float).tobytes(),
         margin,
         tuple(contact_joints),
@@ -232,9 +233,7 @@ def separated_start(
         step = A.T @ np.linalg.solve(A @ A.T + 1e-4 * np.eye(len(b)), b)
         q[movable_q] += step * min(1.0, SEPARATION_STEP / max(np.abs(step).max(), 1e-12))
         q[7:] = np.clip(q[7:], robot.q_lower, robot.q_upper)
-    if len(_SEPARATED) >= 64:
-        _SEPARATED.clear()
-    _SEPARATED[key] = q[7:].copy()
+    _SEPARATED.put(key, q[7:].copy())
     return q[7:]
 
 
@@ -260,7 +259,7 @@ def _pair_gradient(
 
 
 # separated starts per (model, q, margin, contacts, links): a planner's queries share them
-_SEPARATED: dict[tuple[Any, ...], np.ndarray] = {}
+_SEPARATED: BoundedCache[np.ndarray] = BoundedCache("separated starts", 64)
 
 
 # --------------------------------------------------------------------------- the program's rows
@@ -479,8 +478,8 @@ def _soft_min_rows(
     return ca.vertcat(*values), build
 
 
-# CollisionTerm.self_groups per (proxy model, pairs); the model is held: its id stays its own
-_GROUPS: dict[tuple[int, tuple[tuple[int, int], ...]], tuple[Any, list[Any]]] = {}
+# CollisionTerm.self_groups per (proxy model, pairs); the model is held (Ref)
+_GROUPS: BoundedCache[list[Any]] = BoundedCache("collision row groups", 64)
 
 
 @dataclass
@@ -546,10 +545,10 @@ class CollisionTerm(Term):
         about 12 % faster in generated C), and the smooth minimum carries a hand sliding from
         one link of a leg to the next; median iterations were 21.5 and 21.0 on two seeds
         (22.5 and 21.0 per pair of links), mean 24.5 and 22.1 (26.1 and 24.1)."""
-        key = (id(self.pm), self.self_pairs)
+        key = (Ref(self.pm), self.self_pairs)
         cached = _GROUPS.get(key)  # the next solves of a structure have the same pairs
-        if cached is not None and cached[0] is self.pm:
-            return cached[1]
+        if cached is not None:
+            return cached
         limb = self.pm.limb
         groups: dict[tuple[int, int], list[tuple[int, int]]] = {}
         for i, j in self.self_pairs:
@@ -557,12 +556,9 @@ class CollisionTerm(Term):
             if limb is not None:
                 a, b = int(limb[a]), int(limb[b])
             groups.setdefault((min(a, b), max(a, b)), []).append((i, j))
-        if len(_GROUPS) > 64:
-            _GROUPS.clear()
-        _GROUPS[key] = (self.pm, sorted(groups.items()))
-        return _GROUPS[key][1]
+        return _GROUPS.put(key, sorted(groups.items()))
 
-    def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
+    def parameters(self, problem: Instance) -> dict[str, np.ndarray]:
         out = {"collision.margin": np.array([self.margin])}
         if self.env_pairs:
             out["collision.boxes"] = np.column_stack(

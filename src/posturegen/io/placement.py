@@ -2,7 +2,7 @@
 the vertical and moved so that its patches lie as well as they can on their fixed targets.
 
 The base rotation is a local map around the initial orientation (|w_i| <= 2.5 rad, see
-``posturegen.terms.constraints``), so a robot that starts facing +x cannot turn to stand on feet
+``posturegen.terms.configuration``), so a robot that starts facing +x cannot turn to stand on feet
 fixed at a heading of π; started where its fixed contacts are, it only has to adjust.
 """
 

@@ -21,7 +21,6 @@ from ..model.robot import Robot, load_robot
 from ..model.scene import Scene
 from ..plausible import check_angles, check_target
 from ..solver.problem import Problem, SolverOptions, Term
-from ..terms.constraints import PositionTask
 from ..terms.contacts import (
     Contact,
     FixedContact,
@@ -34,6 +33,7 @@ from ..terms.cop import DEFAULT_COP_MARGIN
 from ..terms.costs import ForceCost, PostureCost, TorqueCost
 from ..terms.ellipse_options import EllipseOptions
 from ..terms.friction import FRICTION_KINDS, FrictionModel
+from ..terms.tasks import PositionTask
 from .placement import place_on_fixed_contacts
 
 CONTACT_TYPES = ("fixed", "geometric", "support", "inclusive", "point")

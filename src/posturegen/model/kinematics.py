@@ -20,6 +20,7 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
+from .._cache import BoundedCache, Ref
 from ..errors import ModelError
 
 Expr = ca.SX | ca.MX | ca.DM
@@ -36,12 +37,9 @@ def scratch_data(model: pin.Model) -> pin.Data:
     takes 0.3 ms on Talos, three times per collision-avoiding solve); every user runs
     ``forwardKinematics`` before reading it."""
     cache = getattr(_SCRATCH, "data", None)
-    if cache is None:
-        cache = _SCRATCH.data = {}
-    entry = cache.get(id(model))
-    if entry is None or entry[0] is not model:  # the model is held: its id stays its own
-        entry = cache[id(model)] = (model, model.createData())
-    return entry[1]
+    if cache is None:  # this thread's own: not registered for clear_caches (other threads')
+        cache = _SCRATCH.data = BoundedCache("scratch data", 8, register=False)
+    return cache.get_or_make(Ref(model), model.createData)
 
 
 def skew(v: Expr) -> Expr:

@@ -7,7 +7,6 @@ rigidly attached to a Pinocchio frame: ``T_frame_patch``. Bundled robots come fr
 
 from __future__ import annotations
 
-import functools
 import importlib.metadata
 import importlib.resources
 from collections.abc import Mapping
@@ -20,6 +19,7 @@ import pinocchio as pin
 import yaml
 
 from .. import _fields as F
+from .._cache import memoize
 from ..errors import InputError, ModelError
 from ..hints import with_hint
 from .geometry import ConvexPolygon
@@ -336,7 +336,7 @@ def build_robot(
     return robot
 
 
-@functools.lru_cache(maxsize=8)
+@memoize("bundled robots", 8)
 def load_bundled(name: str) -> Robot:
     """A robot shipped with posturegen, by name: its patch file names the URDF (and SRDF)
     relative to example-robot-data's robots folder, or with ``models: posturegen`` relative
@@ -366,10 +366,16 @@ def load_bundled(name: str) -> Robot:
     )
 
 
-@functools.lru_cache(maxsize=8)
+@memoize("custom robots", 8)
 def _load_custom(
-    urdf: str, srdf: str | None, patches: str | None, package_dirs: tuple[str, ...]
+    urdf: str,
+    srdf: str | None,
+    patches: str | None,
+    package_dirs: tuple[str, ...],
+    name: str | None = None,
 ) -> Robot:
+    """A robot from its files, cached per files and name (a Robot is shared by every caller
+    that asks for the same one: it is never renamed)."""
     urdf_path = Path(urdf).expanduser().resolve()
     data: dict[str, Any] = {}
     if patches is not None:
@@ -378,7 +384,7 @@ def _load_custom(
             bundled if ("/" not in patches and bundled.is_file()) else Path(patches)
         )
     return build_robot(
-        urdf_path.stem,
+        name or urdf_path.stem,
         urdf_path,
         Path(srdf).expanduser().resolve() if srdf else None,
         tuple(Path(p).expanduser().resolve() for p in package_dirs) or (urdf_path.parent,),
@@ -406,12 +412,10 @@ def load_robot(spec: Any, base_dir: Path | None = None) -> Robot:
     dirs = spec.get("package_dirs", [])
     if not isinstance(dirs, list):
         raise InputError("robot.package_dirs", "expected a list of folders", "write [PATH, ...]")
-    robot = _load_custom(
+    return _load_custom(
         rel(spec["urdf"], "robot.urdf"),
         rel(spec["srdf"], "robot.srdf") if spec.get("srdf") else None,
         patches,
         tuple(rel(d, f"robot.package_dirs[{i}]") for i, d in enumerate(dirs)),
+        F.string(spec["name"], "robot.name") if "name" in spec else None,
     )
-    if "name" in spec:
-        robot.name = F.string(spec["name"], "robot.name")
-    return robot

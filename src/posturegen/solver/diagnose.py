@@ -23,6 +23,7 @@ import pinocchio as pin
 from ..collision.active_set import box_label
 from ..model.kinematics import scratch_data
 from ..terms.elastic import Elastic, slack_values
+from .problem import Program
 from .solve import (
     _IPOPT_OK,
     Result,
@@ -94,10 +95,10 @@ class Diagnosis:
 @dataclass
 class Relaxed:
     """The last IPOPT run of an elastic solve (its x, the blocks ``x_index``), its outputs
-    and q (nq,); ``problem`` is the relaxed problem (its ``elastic`` weights, its last
-    collision rows)."""
+    and q (nq,); ``problem`` is what the run solved: the relaxed problem (its ``elastic``
+    weights) with its last collision rows."""
 
-    problem: Any  # posturegen.solver.problem.Problem
+    problem: Program
     run: Any  # posturegen.solver.solve._Run
     outputs: dict[str, np.ndarray]
     q: np.ndarray
@@ -184,7 +185,6 @@ def _elastic_run(problem: Any, elastic: Elastic, opts: Any, start: Relaxed | Non
     relaxed = replace(
         problem,
         elastic=elastic,
-        collision_term=None,
         collision_options=opts,
         # a one-off structure: CasADi's virtual machine, no compilation to C
         solver_options=replace(
@@ -193,10 +193,11 @@ def _elastic_run(problem: Any, elastic: Elastic, opts: Any, start: Relaxed | Non
     )
     x0, layout = (None, None) if start is None else (start.x, start.x_index)
     if opts is None:
-        run = _run_ipopt(relaxed, x0, layout=layout)
+        run = _run_ipopt(Program.of(relaxed), x0, layout=layout)
     else:
-        run = _solve_avoiding(relaxed, x0, [], layout)[1][-1]
-    return Relaxed(relaxed, run, _outputs(run), configuration_from_x(relaxed, run.compiled, run.x))
+        run = _solve_avoiding(Program.of(relaxed), x0, [], layout)[1][-1]
+    q = configuration_from_x(relaxed, run.compiled, run.x)
+    return Relaxed(run.program, run, _outputs(run), q)
 
 
 def from_relaxed(relaxed: Relaxed) -> Diagnosis:

@@ -3,11 +3,11 @@ collision rows included, and how the collision rows come and go with the active 
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
 from ..collision.active_set import SELF_PER_LINK, ActiveSet, box_label
 from ..collision.rows import CollisionTerm
+from .problem import Program
 
 
 def initial_collision_term(problem: Any) -> tuple[ActiveSet, CollisionTerm] | None:
@@ -38,7 +38,7 @@ def describe(problem: Any) -> str:
     if initial is None:
         return problem.summary()
     check, term = initial
-    with_rows = dataclasses.replace(problem, collision_term=term)
+    with_rows = Program.of(problem, collision_term=term)
     return "\n".join([with_rows.summary(), *_collision_lines(check, term)])
 
 

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from .._cache import BoundedCache
 from ..collision.active_set import ActiveSet
 from ..collision.pairs import pair_rule, unchecked_entries
 from ..collision.rows import (
@@ -25,7 +26,8 @@ from ..collision.rows import (
     separated_start,
 )
 from ..verify import SCHEMA, VerifyReport, verify_posture
-from .problem import _CACHE, Problem, SolverOptions
+from .compile import CompiledNLP, is_compiled
+from .problem import Problem, Program, SolverOptions
 
 _IPOPT_OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
 
@@ -76,7 +78,8 @@ class Result:
 class _Run:
     """One IPOPT run: its solution and what it cost."""
 
-    compiled: Any
+    program: Program  # what the run solved: the problem with this run's overrides
+    compiled: CompiledNLP
     x: np.ndarray
     p: np.ndarray
     f: float
@@ -89,7 +92,7 @@ class _Run:
 
 
 def _run_ipopt(
-    problem: Problem,
+    program: Program,
     x0: np.ndarray | None,
     lam_x0: np.ndarray | None = None,
     lam_g0: dict[str, np.ndarray] | None = None,
@@ -100,10 +103,11 @@ def _run_ipopt(
     ``x0``, the problem's initial guess with ``joints0`` (nj,) for the joints when given.
     ``layout``: the variable blocks of ``x0`` and ``lam_x0`` when they may differ from this
     program's (an elastic program's collision slacks grow with the active set)."""
-    built_before = problem.key() in _CACHE
-    compiled = problem.compile()
-    compiled.refresh()  # generated C once it is built (posturegen.solver.codegen)
-    x_init, p, lbg, ubg = problem.numeric(compiled)
+    built_before = is_compiled(program)
+    compiled = program.compile()
+    with compiled.lock:
+        compiled.refresh()  # generated C once it is built (posturegen.solver.codegen)
+    x_init, p, lbg, ubg = program.numeric(compiled)
     if x0 is not None and layout is not None and layout != compiled.x_index:
         x0 = _carried(x0, layout, compiled.x_index, x_init)
         if lam_x0 is not None:
@@ -119,13 +123,15 @@ def _run_ipopt(
             if name in lam_g0 and lam_g0[name].size == sl.stop - sl.start:
                 lam[sl] = lam_g0[name]
         warm = {"lam_x0": lam_x0, "lam_g0": lam}
-    t0 = time.perf_counter()
-    sol = compiled.solver(
-        x0=x_init, p=p, lbx=compiled.lbx, ubx=compiled.ubx, lbg=lbg, ubg=ubg, **warm
-    )
-    wall = time.perf_counter() - t0
-    stats = compiled.solver.stats()
+    with compiled.lock:  # a solver's stats() are those of its last call: one thread at a time
+        t0 = time.perf_counter()
+        sol = compiled.solver(
+            x0=x_init, p=p, lbx=compiled.lbx, ubx=compiled.ubx, lbg=lbg, ubg=ubg, **warm
+        )
+        wall = time.perf_counter() - t0
+        stats = compiled.solver.stats()
     return _Run(
+        program=program,
         compiled=compiled,
         x=np.array(sol["x"]).ravel(),
         p=p,
@@ -180,7 +186,9 @@ def _map_collision_multipliers(lam: dict[str, Any], term: Any) -> dict[str, np.n
 # Sphere pairs that entered the program of earlier problems of the same structure: the next
 # problem of that structure starts with them, so that its program is usually the same one
 # (a planner's next query pays no rebuild, and its first run already has the right rows).
-_LEARNED: dict[tuple[Any, ...], tuple[frozenset[tuple[int, int]], frozenset[tuple[int, int]]]] = {}
+_LEARNED: BoundedCache[tuple[frozenset[tuple[int, int]], frozenset[tuple[int, int]]]] = (
+    BoundedCache("learned active sets", 64)
+)
 _LEARNED_MAX_PAIRS = 160
 # collision rows start close to active: a smaller initial barrier parameter took 32 instead
 # of 44 median iterations on talos-near-body-collision (n = 20, mu_init 1e-2 against IPOPT's
@@ -215,19 +223,16 @@ def solve(problem: Problem, x0: np.ndarray | None = None) -> Result:
     program again. The Result counts every IPOPT run. Why a failure failed:
     :func:`posturegen.solver.diagnose.diagnose`."""
     x_start = None if x0 is None else np.asarray(x0, dtype=float)
-    result, runs = _solve_continued(problem, x_start, [])
+    program = Program.of(problem)
+    result, runs = _solve_continued(program, x_start, [])
     effort = problem.robot.effort_limit
     if result.success or result.status in _IPOPT_OK or not np.any(np.isfinite(effort)):
         return result
-    scale = problem.torque_limit_scale
-    problem.torque_limit_scale = scale * TORQUE_CONTINUATION
-    try:
-        _, relaxed_runs = _solve_continued(problem, x_start, runs)
-    finally:
-        problem.torque_limit_scale = scale
+    relaxed = program.but(torque_limit_scale=program.torque_limit_scale * TORQUE_CONTINUATION)
+    _, relaxed_runs = _solve_continued(relaxed, x_start, runs)
     if relaxed_runs[-1].status not in _IPOPT_OK:
         return result
-    retry, _ = _solve_continued(problem, relaxed_runs[-1].x, relaxed_runs)
+    retry, _ = _solve_continued(program, relaxed_runs[-1].x, relaxed_runs)
     return retry if retry.success else result
 
 
@@ -238,17 +243,16 @@ def _outputs(run: _Run) -> dict[str, np.ndarray]:
 
 
 def _solve_continued(
-    problem: Problem, x_start: np.ndarray | None, prior: list[_Run]
+    program: Program, x_start: np.ndarray | None, prior: list[_Run]
 ) -> tuple[Result, list[_Run]]:
     """One solve from ``x_start`` (the active-set loop with collision avoidance, and the
     collision continuation when it fails); ``prior`` runs count in the Result. Returns the
     Result and every run so far."""
-    opts = problem.collision_options
-    problem.collision_term = None
-    if opts is None:
-        runs = [*prior, _run_ipopt(problem, x_start)]
-        return _result(problem, runs), runs
-    result, runs = _solve_avoiding(problem, x_start, prior)
+    program = program.but(collision_term=None)
+    if program.collision_options is None:
+        runs = [*prior, _run_ipopt(program, x_start)]
+        return _result(program, runs), runs
+    result, runs = _solve_avoiding(program, x_start, prior)
     if result.success:
         return result, runs
     # Continuation: without collision rows the program is smaller and smoother, and it often
@@ -256,18 +260,14 @@ def _solve_continued(
     # active at once); its solution then starts the full program. On the inclined ladder
     # (HRP-2, left foot to step 2): 355 iterations, infeasible; 22 without collisions, then
     # 264 from there, verified.
-    problem.collision_options, problem.collision_term = None, None
-    try:
-        relaxed = _run_ipopt(problem, x_start)
-    finally:
-        problem.collision_options = opts
+    relaxed = _run_ipopt(program.but(collision_options=None), x_start)
     if relaxed.status not in _IPOPT_OK:
         return result, [*runs, relaxed]
-    return _solve_avoiding(problem, relaxed.x, [*runs, relaxed])
+    return _solve_avoiding(program, relaxed.x, [*runs, relaxed])
 
 
 def _solve_avoiding(
-    problem: Problem,
+    program: Program,
     x0: np.ndarray | None,
     prior: list[_Run],
     layout: dict[str, slice] | None = None,
@@ -275,38 +275,35 @@ def _solve_avoiding(
     """The active-set loop of :func:`solve` from ``x0`` (laid out as ``layout``, default
     this program's); ``prior`` runs count in the Result's iterations and times. Returns the
     Result and every run so far."""
-    opts = problem.collision_options
-    active = ActiveSet.of(problem)
+    program = program.but(collision_term=None)
+    opts = program.collision_options
+    active = ActiveSet.of(program)
     joints0 = None  # the first start: q_init with its pressed self pairs parted
     if x0 is None and len(active.links):
         joints0 = separated_start(
-            problem.robot,
+            program.robot,
             active.pm,
             active.links,
             opts.margin,
-            problem.q_init,
-            [c.patch.joint_id for c in problem.contacts],
+            program.q_init,
+            [c.patch.joint_id for c in program.contacts],
         )
-    base_key = (problem.key(), len(active.boxes), opts.self_collision, opts.exclude)
+    base_key = (program.key(), len(active.boxes), opts.self_collision, opts.exclude)
     learned_self, learned_env = _LEARNED.get(base_key, (frozenset(), frozenset()))
     active.self_pairs, active.env_pairs = set(learned_self), set(learned_env)
-    cold = problem.solver_options
-    problem.solver_options = _collision_solver_options(cold)
-    loop = _Loop(problem, active, problem.solver_options, x0, joints0, layout)
+    run_options = _collision_solver_options(program.solver_options)
+    loop = _Loop(program.but(solver_options=run_options), active, run_options, x0, joints0, layout)
     result: Result | None = None
-    try:
-        for _attempt in range(opts.tighten + 1):
-            loop.rounds(opts.max_rounds)
-            if len(active.self_pairs) + len(active.env_pairs) <= _LEARNED_MAX_PAIRS:
-                _LEARNED[base_key] = (frozenset(active.self_pairs), frozenset(active.env_pairs))
-            result = _result(problem, [*prior, *loop.runs], loop.margin)
-            if result.success or loop.runs[-1].status not in _IPOPT_OK:
-                return result, [*prior, *loop.runs]
-            if not any(c.name.startswith("collision") for c in result.verification.failures):
-                return result, [*prior, *loop.runs]
-            loop.margin += 0.01  # the proxies passed but a mesh did not: tighten and retry
-    finally:
-        problem.solver_options = cold
+    for _attempt in range(opts.tighten + 1):
+        loop.rounds(opts.max_rounds)
+        if len(active.self_pairs) + len(active.env_pairs) <= _LEARNED_MAX_PAIRS:
+            _LEARNED.put(base_key, (frozenset(active.self_pairs), frozenset(active.env_pairs)))
+        result = _result(program, [*prior, *loop.runs], loop.margin)
+        if result.success or loop.runs[-1].status not in _IPOPT_OK:
+            return result, [*prior, *loop.runs]
+        if not any(c.name.startswith("collision") for c in result.verification.failures):
+            return result, [*prior, *loop.runs]
+        loop.margin += 0.01  # the proxies passed but a mesh did not: tighten and retry
     return result, [*prior, *loop.runs]  # type: ignore[return-value]
 
 
@@ -327,7 +324,7 @@ def _collision_solver_options(options: SolverOptions) -> SolverOptions:
 class _Loop:
     """The state of the active-set loop: the runs so far, the warm start, the margin."""
 
-    problem: Problem
+    program: Program  # the problem with the collision runs' solver options
     active: ActiveSet
     cold_run: SolverOptions
     x_warm: np.ndarray | None
@@ -338,14 +335,14 @@ class _Loop:
     margin: float = 0.0
 
     def __post_init__(self) -> None:
-        self.margin = self.problem.collision_options.margin
-        self.q_check = self.problem.q_init
+        self.margin = self.program.collision_options.margin
+        self.q_check = self.program.q_init
 
     def rounds(self, max_rounds: int) -> None:
         """Up to ``max_rounds`` IPOPT runs, each after holding the pairs near (and violated
         at) the last posture; ends when no candidate pair outside the held ones is violated
         or a run fails."""
-        problem, active = self.problem, self.active
+        active = self.active
         for _round in range(max_rounds):
             scan = active.scan(self.q_check, self.margin)
             if self.runs and not (scan.violated_self or scan.violated_env):
@@ -358,32 +355,32 @@ class _Loop:
                 active.boxes,
                 self.margin,
             )
-            problem.collision_term = term
             if self.lam is None:
-                problem.solver_options = self.cold_run
-                run = _run_ipopt(problem, self.x_warm, joints0=self.joints0, layout=self.layout)
+                program = self.program.but(collision_term=term, solver_options=self.cold_run)
+                run = _run_ipopt(program, self.x_warm, joints0=self.joints0, layout=self.layout)
             else:
-                problem.solver_options = dataclasses.replace(self.cold_run, warm_start=True)
+                warm = dataclasses.replace(self.cold_run, warm_start=True)
+                program = self.program.but(collision_term=term, solver_options=warm)
                 lam = _map_collision_multipliers(self.lam, term)
                 layout = self.runs[-1].compiled.x_index
-                run = _run_ipopt(problem, self.x_warm, self.runs[-1].lam_x, lam, layout=layout)
+                run = _run_ipopt(program, self.x_warm, self.runs[-1].lam_x, lam, layout=layout)
             self.runs.append(run)
             if run.status not in _IPOPT_OK:
                 return
             self.x_warm = run.x
             self.lam = _block_multipliers(run, term)
-            self.q_check = configuration_from_x(problem, run.compiled, run.x)
+            self.q_check = configuration_from_x(program, run.compiled, run.x)
 
 
-def _result(problem: Problem, runs: list[_Run], margin: float | None = None) -> Result:
+def _result(program: Program, runs: list[_Run], margin: float | None = None) -> Result:
     """The Result of the last run (times and iterations summed over every run)."""
     run = runs[-1]
     outputs = _outputs(run)
-    q = configuration_from_x(problem, run.compiled, run.x)
+    q = configuration_from_x(program, run.compiled, run.x)
     torques = outputs["torques"]
-    posture = posture_dict(problem, q, torques, outputs, margin)
-    geometry = problem.robot.collision_model() if problem.collision_options is not None else None
-    report = verify_posture(posture, problem.robot.model, geometry)
+    posture = posture_dict(program, q, torques, outputs, margin)
+    geometry = program.robot.collision_model() if program.collision_options is not None else None
+    report = verify_posture(posture, program.robot.model, geometry)
     status = run.status
     ipopt_ok = status in _IPOPT_OK
     success = ipopt_ok and report.ok
@@ -438,7 +435,7 @@ def _result(problem: Problem, runs: list[_Run], margin: float | None = None) -> 
     )
 
 
-def configuration_from_x(problem: Problem, compiled: Any, x: np.ndarray) -> np.ndarray:
+def configuration_from_x(problem: Problem | Program, compiled: Any, x: np.ndarray) -> np.ndarray:
     """Pinocchio q (nq,) from the solver's variables: R = R0·exp(w) computed exactly."""
     p = x[compiled.x_index["base.position"]]
     w = x[compiled.x_index["base.rotation"]]
@@ -449,7 +446,7 @@ def configuration_from_x(problem: Problem, compiled: Any, x: np.ndarray) -> np.n
 
 
 def posture_dict(
-    problem: Problem,
+    problem: Problem | Program,
     q: np.ndarray,
     torques: np.ndarray,
     outputs: dict[str, np.ndarray],
@@ -485,7 +482,7 @@ def posture_dict(
     }
 
 
-def _collision_dict(problem: Problem, margin: float | None) -> dict[str, Any] | None:
+def _collision_dict(problem: Problem | Program, margin: float | None) -> dict[str, Any] | None:
     """What the mesh check must test: the boxes, and the pairs it leaves unchecked with the
     reason of each (posturegen.collision.pairs; verify recomputes all but the user's)."""
     opts = problem.collision_options

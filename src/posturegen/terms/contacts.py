@@ -18,11 +18,11 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import InputError
+from ..model.ellipse_rows import ellipse_edge_constraints_paper, ellipse_edge_constraints_support
 from ..model.geometry import ConvexPolygon, intersect
 from ..model.min_ellipse import default_min_radii
 from ..model.robot import Patch
 from ..model.scene import Surface
-from ..solver.problem import BuildContext, Problem, Term
 from .cop import (
     DEFAULT_COP_MARGIN,
     check_polygon_margin,
@@ -34,6 +34,7 @@ from .cop import (
 from .ellipse_options import EllipseOptions, thin_scaling
 from .forces import declare_forces, force_guess, forces_dict
 from .friction import FrictionModel
+from .nlp import BuildContext, Instance, Term
 
 
 def patch_in_surface(position: np.ndarray, yaw: float) -> pin.SE3:
@@ -166,7 +167,7 @@ class FixedContact(Contact):
         if self.cop_margin > 0:
             declare_polygon_cop(nlp, pre, phi_n, self.area.n)
 
-    def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
+    def parameters(self, problem: Instance) -> dict[str, np.ndarray]:
         pre = f"contact.{self.name}"
         out = {
             f"{pre}.R_target": self.T_world_target.rotation,
@@ -180,7 +181,7 @@ class FixedContact(Contact):
             out[f"{pre}.cop_margin"] = np.array([self.cop_margin])
         return out
 
-    def initial_guess(self, problem: Problem) -> dict[str, np.ndarray]:
+    def initial_guess(self, problem: Instance) -> dict[str, np.ndarray]:
         return {f"contact.{self.name}.forces": force_guess(problem, self.n_points)}
 
     def to_dict(self, outputs: dict[str, np.ndarray]) -> dict[str, Any]:
@@ -290,11 +291,6 @@ class _EllipseContact(FloatingContact):
     def _declare_ellipse(self, ctx: BuildContext, patch_vertices: ca.SX) -> tuple[ca.SX, ca.SX]:
         """Ellipse variables and the card(P1) + card(P2) inclusion rows; returns e (5,) and
         the real ellipse's B = S⁻¹·R(θ)·diag(rx, ry) (2, 2)."""
-        from ..model.geometry import (
-            ellipse_edge_constraints_paper,
-            ellipse_edge_constraints_support,
-        )
-
         nlp, pre = ctx.nlp, f"contact.{self.name}"
         r_lo, r_hi = self._min_radii()
         # unscaled plane: the radii are the real semi-axes, so the minimums are plain bounds
@@ -353,7 +349,7 @@ class _EllipseContact(FloatingContact):
             f"{pre}.surface_vertices": self.surface.polygon.vertices.T,
         }
 
-    def _ellipse_guess(self, problem: Problem) -> np.ndarray:
+    def _ellipse_guess(self, problem: Instance) -> np.ndarray:
         """Start inside the surface at the point nearest to the patch's initial position, with
         small radii, in the scaled plane."""
         p, yaw = self.realized_pose(problem.robot.model, problem.q_init)
@@ -419,10 +415,10 @@ class GeometricContact(_EllipseContact):
         V = self._declare_plane(ctx)[2]
         self._declare_ellipse(ctx, V)
 
-    def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
+    def parameters(self, problem: Instance) -> dict[str, np.ndarray]:
         return {**self._plane_parameters(), **self._ellipse_parameters()}
 
-    def initial_guess(self, problem: Problem) -> dict[str, np.ndarray]:
+    def initial_guess(self, problem: Instance) -> dict[str, np.ndarray]:
         return {f"contact.{self.name}.ellipse": self._ellipse_guess(problem)}
 
     def to_dict(self, outputs: dict[str, np.ndarray]) -> dict[str, Any]:
@@ -487,7 +483,7 @@ class SupportContact(_EllipseContact):
             radii = None if self.scaled else e[3:5]
             declare_ellipse_cop(ctx.nlp, pre, phi_n, t, B, radii)
 
-    def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
+    def parameters(self, problem: Instance) -> dict[str, np.ndarray]:
         out = {
             **self._plane_parameters(),
             **self._ellipse_parameters(),
@@ -497,7 +493,7 @@ class SupportContact(_EllipseContact):
             out[f"contact.{self.name}.cop_margin"] = np.array([self.cop_margin])
         return out
 
-    def initial_guess(self, problem: Problem) -> dict[str, np.ndarray]:
+    def initial_guess(self, problem: Instance) -> dict[str, np.ndarray]:
         pre = f"contact.{self.name}"
         out = {
             f"{pre}.ellipse": self._ellipse_guess(problem),
@@ -535,7 +531,7 @@ class InclusiveContact(FloatingContact):
         rows = normals @ V.T - ca.repmat(offsets, 1, V.shape[0])  # (n_s, n_p)
         ctx.nlp.constrain(f"contact.{self.name}.inclusion", ca.vec(rows), -np.inf, 0.0)
 
-    def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
+    def parameters(self, problem: Instance) -> dict[str, np.ndarray]:
         return {**self._plane_parameters(), **self._halfplane_parameters()}
 
     def to_dict(self, outputs: dict[str, np.ndarray]) -> dict[str, Any]:
@@ -566,7 +562,7 @@ class PointContact(FloatingContact):
         ctx.nlp.constrain(f"contact.{self.name}.point_inside", normals @ q2 - offsets, -np.inf, 0.0)
         ctx.nlp.output(f"contact.{self.name}.point_world", pw)
 
-    def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
+    def parameters(self, problem: Instance) -> dict[str, np.ndarray]:
         return {
             **self._plane_parameters(),
             **self._halfplane_parameters(),

@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import InputError
 from ..model.geometry import ConvexPolygon
 from ..model.min_ellipse import inscribed_disc
-from ..solver.problem import NLP
+from .nlp import NLP
 
 # [m] Default CoP margin of every force-bearing contact (options.cop_margin): the placement
 # accuracy of a position-controlled humanoid's hand or foot (a few mm at the end of a 0.7 m

@@ -8,7 +8,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from ..solver.problem import BuildContext, Problem, Term
+from .nlp import BuildContext, Instance, Term
 
 
 @dataclass
@@ -43,7 +43,7 @@ class PostureCost(Term):
             ),
         )
 
-    def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
+    def parameters(self, problem: Instance) -> dict[str, np.ndarray]:
         robot = problem.robot
         qj0 = robot.q_init[7:] if self.reference == "default" else problem.q_init[7:]
         return {
@@ -82,7 +82,7 @@ class ForceCost(Term):
         total = sum((ca.sumsqr(f) for _, _, f in ctx.force_points), ca.SX(0))
         ctx.nlp.minimize(self.name, weight * total / W**2)
 
-    def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
+    def parameters(self, problem: Instance) -> dict[str, np.ndarray]:
         return {"forces.weight": np.array([self.weight])}
 
 
@@ -103,5 +103,5 @@ class TorqueCost(Term):
         tau = ctx.torques
         ctx.nlp.minimize(self.name, weight * ca.sumsqr(tau / ca.DM(scale)))
 
-    def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
+    def parameters(self, problem: Instance) -> dict[str, np.ndarray]:
         return {"torques.weight": np.array([self.weight])}

@@ -8,8 +8,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from ..solver.problem import BuildContext, Problem
 from .friction import FrictionModel
+from .nlp import BuildContext, Instance
 
 
 def declare_forces(
@@ -43,7 +43,7 @@ def declare_forces(
     return phi[2::3]
 
 
-def force_guess(problem: Problem, n_points: int) -> np.ndarray:
+def force_guess(problem: Instance, n_points: int) -> np.ndarray:
     """Initial φ (3·n_points,): the weight shared evenly over every force point, along the
     normal."""
     total = sum(c.force_points_count() for c in problem.contacts) or 1
