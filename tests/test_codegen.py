@@ -19,7 +19,8 @@ import pytest
 import yaml
 
 from posturegen import problem_from_dict, solve
-from posturegen.cli import _demo_dir
+from posturegen.cli import _demo_dir, main
+from posturegen.errors import InputError
 from posturegen.solver import _lifeline, codegen
 from posturegen.solver.compile import _CACHE, symbolic
 
@@ -85,8 +86,22 @@ def test_library_key_covers_the_code_of_hand_built_derivatives(monkeypatch):
 
 def test_modes():
     assert codegen.resolve_mode("off") == "off"
-    with pytest.raises(ValueError, match="codegen mode"):
+    with pytest.raises(InputError, match="SolverOptions.codegen: unknown codegen mode 'fast'"):
         codegen.resolve_mode("fast")
+
+
+def test_a_bad_codegen_variable_is_a_one_line_error(monkeypatch, tmp_path, capsys):
+    """$POSTUREGEN_CODEGEN=fast: one line naming the variable and the allowed values, exit 2."""
+    monkeypatch.setenv("POSTUREGEN_CODEGEN", "fast")
+    with pytest.raises(InputError) as err:
+        codegen.resolve_mode(None)
+    assert str(err.value) == (
+        "$POSTUREGEN_CODEGEN: unknown codegen mode 'fast' (use one of: auto, sync, off)"
+    )
+    _CACHE.clear()  # a structure compiled before would not look at the variable
+    code = main(["solve", str(_demo_dir() / "stand-reach.yaml"), "--out", str(tmp_path)])
+    err_lines = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err_lines) == 1 and "$POSTUREGEN_CODEGEN" in err_lines[0]
 
 
 @needs_cc

@@ -21,7 +21,9 @@ from posturegen.model.ellipse_rows import (
     ellipse_edge_constraints_support,
 )
 from posturegen.model.geometry import ConvexPolygon, Ellipse, intersect
+from tests.strategies import convex_polygons
 
+COORD3 = st.floats(-3.0, 3.0, allow_nan=False)
 SETTINGS = settings(
     derandomize=True,
     deadline=None,
@@ -217,11 +219,9 @@ def test_halfplanes_edges_and_transforms():
 
 
 @settings(SETTINGS, max_examples=30)
-@given(seed=st.integers(0, 2**31 - 1))
-def test_contains_and_distance_match_shapely(seed):
-    rng = np.random.default_rng(seed)
-    P = random_convex(rng)
-    pts = rng.uniform(-3, 3, size=(200, 2))
+@given(P=convex_polygons(), pts=st.lists(st.tuples(COORD3, COORD3), min_size=1, max_size=200))
+def test_contains_and_distance_match_shapely(P, pts):
+    pts = np.array(pts)
     sp = P.to_shapely()
     dist = P.distance_inside(pts)
     for x, d in zip(pts, dist, strict=True):
@@ -239,10 +239,8 @@ def test_contains_and_distance_match_shapely(seed):
 
 
 @settings(SETTINGS, max_examples=100)
-@given(seed=st.integers(0, 2**31 - 1))
-def test_intersect_area_matches_shapely(seed):
-    rng = np.random.default_rng(seed)
-    A, B = random_convex(rng), random_convex(rng)
+@given(A=convex_polygons(), B=convex_polygons())
+def test_intersect_area_matches_shapely(A, B):
     expected = A.to_shapely().intersection(B.to_shapely()).area
     inter = intersect(A, B)
     if inter is None:
@@ -290,11 +288,14 @@ def test_ellipse_basics():
 
 
 @settings(SETTINGS, max_examples=30)
-@given(seed=st.integers(0, 2**31 - 1))
-def test_inside_margin_is_exact_support_margin(seed):
-    rng = np.random.default_rng(seed)
-    P = random_convex(rng)
-    e = Ellipse(P.centroid + rng.normal(0, 0.2, 2), rng.uniform(-4, 4), rng.uniform(0.01, 1, 2))
+@given(
+    P=convex_polygons(),
+    offset=st.tuples(st.floats(-0.4, 0.4), st.floats(-0.4, 0.4)),
+    angle=st.floats(-4.0, 4.0),
+    radii=st.tuples(st.floats(0.01, 1.0), st.floats(0.01, 1.0)),
+)
+def test_inside_margin_is_exact_support_margin(P, offset, angle, radii):
+    e = Ellipse(P.centroid + np.array(offset), angle, radii)
     pts = e.boundary_points(20000)
     sampled = float(np.min(P.halfplanes()[1][None, :] - pts @ P.halfplanes()[0].T))
     # the exact margin is the min over the continuum of the ellipse: <= every sample, and close

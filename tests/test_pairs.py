@@ -55,7 +55,7 @@ def _as_checked(result) -> dict[str, Any]:
     unchecked list a solve with it would write: none of the user's)."""
     posture = copy.deepcopy(result.posture)
     with_rows = problem_from_dict(SQUAT)
-    from posturegen.solver.solve import _collision_dict
+    from posturegen.io.posture_file import _collision_dict
 
     posture["collision"] = _collision_dict(with_rows, None)
     return posture

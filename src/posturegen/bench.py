@@ -20,6 +20,7 @@ import pinocchio as pin
 
 from .io.problem_file import problem_from_dict
 from .model.robot import load_bundled
+from .solver import codegen
 from .solver.problem import Problem
 from .solver.solve import solve
 
@@ -350,8 +351,6 @@ class _FamilyRun:
     that two families can be interleaved; :meth:`report` collects the statistics."""
 
     def __init__(self, name: str, n: int, seed: int, jit: bool) -> None:
-        from .solver import codegen
-
         self.name, self.n = name, n
         self.description, generator = FAMILIES[name]
         self.problems = list(generator(n + 1, seed))
@@ -386,8 +385,6 @@ class _FamilyRun:
             self.failures.append(f"#{i}: {result.message}")
 
     def report(self) -> FamilyReport:
-        from .solver import codegen
-
         ms = [1e3 * t for t in self.times]
         compiled = self.compiled
         return FamilyReport(

@@ -17,7 +17,6 @@ Every stage is written as a plain problem file (``NN-name.yaml``, solvable on it
 from __future__ import annotations
 
 import copy
-import json
 import re
 import time
 from collections.abc import Callable
@@ -31,13 +30,14 @@ import yaml
 
 from .. import _fields as F
 from ..errors import InputError
+from ..io.posture_file import write_posture
 from ..io.problem_file import problem_from_dict
+from ..io.sequence_file import write_sequence
 from ..model.robot import load_robot
 from ..solver.diagnose import diagnose as diagnosed
 from ..solver.problem import Problem
 from ..solver.solve import Result, solve
 from ..terms.contacts import FixedContact, FloatingContact
-from ..verify import SEQUENCE_SCHEMA
 
 _SCENE_KEYS = ("robot", "mu", "surfaces", "obstacles", "friction", "costs")
 
@@ -220,7 +220,7 @@ def run_sequence(
         (out / f"{stem}.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
         posture = dict(result.posture)
         posture["stage"] = {"index": k, "name": name, "sequence": report.name}
-        (out / f"{stem}.json").write_text(json.dumps(posture, indent=1))
+        write_posture(out / f"{stem}.json", posture)
         rep = StageReport(name, f"{stem}.yaml", f"{stem}.json", result, wall, result.diagnosis)
         report.stages.append(rep)
         if progress:
@@ -234,13 +234,14 @@ def run_sequence(
 
 def _write_index(seq: dict[str, Any], report: SequenceReport, out: Path) -> None:
     robot = seq["robot"] if isinstance(seq["robot"], str) else seq["robot"].get("name", "custom")
-    index = {
-        "schema": SEQUENCE_SCHEMA,
-        "name": report.name,
-        "description": seq.get("description", ""),
-        "robot": robot,
-        "success": report.success,
-        "planned_stages": report.planned,
-        "stages": [s.to_dict() for s in report.stages],
-    }
-    (out / "sequence.json").write_text(json.dumps(index, indent=1))
+    # stage posture paths as written (relative to out): write_sequence stores them relative
+    stages = [{**s.to_dict(), "posture": str(out / s.posture_file)} for s in report.stages]
+    write_sequence(
+        out / "sequence.json",
+        stages,
+        name=report.name,
+        description=seq.get("description", ""),
+        robot=robot,
+        success=report.success,
+        planned_stages=report.planned,
+    )

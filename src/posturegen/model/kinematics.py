@@ -222,11 +222,6 @@ class CasadiKinematics:
         """World position (3,) of a point given in joint ``joint_id``'s frame."""
         return state.p[joint_id] + state.R[joint_id] @ p_local
 
-    def joint_axis_world(self, state: KinematicState, i: int) -> Expr:
-        """World unit axis (3,) of joint i (revolute or prismatic)."""
-        info = self._joints[i]
-        return state.R[i] @ info.axis
-
     def actuated_joint_ids(self) -> list[int]:
         """Joint ids of the actuated joints, in qj order."""
         ids = [i for i in range(2, len(self._joints))]

@@ -52,6 +52,7 @@ from typing import Any
 
 import casadi as ca
 
+from ..errors import InputError
 from . import _lifeline
 
 CODEGEN_VERSION = 1
@@ -84,9 +85,11 @@ def compiler() -> str | None:
 def resolve_mode(option: str | None) -> str:
     """The effective mode: the option, else $POSTUREGEN_CODEGEN, else ``auto``; ``off`` without
     a C compiler."""
-    mode = option or os.environ.get("POSTUREGEN_CODEGEN") or "auto"
+    env = os.environ.get("POSTUREGEN_CODEGEN")
+    mode = option or env or "auto"
     if mode not in MODES:
-        raise ValueError(f"codegen mode '{mode}': expected one of {', '.join(MODES)}")
+        where = "SolverOptions.codegen" if option else "$POSTUREGEN_CODEGEN"
+        raise InputError(where, f"unknown codegen mode '{mode}'", f"use one of: {', '.join(MODES)}")
     if mode != "off" and compiler() is None:
         return "off"
     return mode

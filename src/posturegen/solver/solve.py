@@ -7,7 +7,6 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,14 +17,12 @@ import pinocchio as pin
 
 from .._cache import BoundedCache
 from ..collision.active_set import ActiveSet
-from ..collision.pairs import pair_rule, unchecked_entries
 from ..collision.rows import (
     CollisionTerm,
-    env_boxes,
-    excluded_joint_ids,
     separated_start,
 )
-from ..verify import SCHEMA, VerifyReport, verify_posture
+from ..io.posture_file import posture_dict, write_posture
+from ..verify import VerifyReport, verify_posture
 from .compile import CompiledNLP, is_compiled
 from .problem import Problem, Program, SolverOptions
 
@@ -63,15 +60,13 @@ class Result:
 
     @property
     def max_violation(self) -> float:
-        """Worst value among the re-check's quantities (see :class:`VerifyReport`)."""
+        """The worst re-check relative to its tolerance (<= 1: all passed; see
+        :attr:`VerifyReport.max_violation`)."""
         return self.verification.max_violation
 
     def write(self, path: str | Path) -> Path:
         """Write the posture file (JSON)."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(self.posture, indent=1))
-        return path
+        return write_posture(path, self.posture)
 
 
 @dataclass
@@ -443,62 +438,3 @@ def configuration_from_x(problem: Problem | Program, compiled: Any, x: np.ndarra
     R0 = pin.Quaternion(problem.q_init[3:7]).normalized().matrix()
     quat = pin.Quaternion(R0 @ pin.exp3(w)).normalized().coeffs()  # (x, y, z, w)
     return np.concatenate([p, quat, qj])
-
-
-def posture_dict(
-    problem: Problem | Program,
-    q: np.ndarray,
-    torques: np.ndarray,
-    outputs: dict[str, np.ndarray],
-    margin: float | None = None,
-) -> dict[str, Any]:
-    """The posture-file content (schema posturegen.posture/1) without the solver fields."""
-    robot = problem.robot
-    tasks = []
-    for t in problem.tasks:
-        tasks.append(
-            {
-                "type": "position",
-                "frame": t.frame,
-                "target": np.asarray(t.target).tolist(),
-                "rotation": None if t.R_target is None else np.asarray(t.R_target).tolist(),
-                "weight": t.weight,
-            }
-        )
-    return {
-        "schema": SCHEMA,
-        "robot": robot.to_dict(),
-        "q": q.tolist(),
-        "joint_names": robot.joint_names,
-        "torques": np.asarray(torques).tolist(),
-        "gravity": np.array(robot.model.gravity.linear).tolist(),
-        "contacts": [c.to_dict(outputs) for c in problem.contacts],
-        "tasks": tasks,
-        "obstacles": [o.to_dict() for o in problem.scene.obstacles],
-        "surfaces": [s.to_dict() for s in problem.scene.surfaces.values()],
-        "self_collision": problem.self_collision,
-        "torque_limit_scale": problem.torque_limit_scale,
-        "collision": _collision_dict(problem, margin),
-    }
-
-
-def _collision_dict(problem: Problem | Program, margin: float | None) -> dict[str, Any] | None:
-    """What the mesh check must test: the boxes, and the pairs it leaves unchecked with the
-    reason of each (posturegen.collision.pairs; verify recomputes all but the user's)."""
-    opts = problem.collision_options
-    if opts is None:
-        return None
-    robot = problem.robot
-    model = robot.model
-    unchecked: list[dict[str, Any]] = []
-    if opts.self_collision:
-        geometry = robot.collision_model()
-        rule = pair_rule(model, geometry, str(robot.srdf) if robot.srdf else None)
-        user = frozenset(excluded_joint_ids(robot, opts))
-        unchecked = unchecked_entries(model, geometry, rule, user)
-    return {
-        "margin": opts.margin if margin is None else margin,
-        "self": opts.self_collision,
-        "unchecked": unchecked,
-        "boxes": [b.to_dict(model) for b in env_boxes(problem)],
-    }

@@ -16,9 +16,12 @@ from .nlp import BuildContext, Instance, Term
 class PositionTask(Term):
     """Frame position = target (3,) [m] in world, optionally orientation = R_target.
 
-    Hard constraint by default; with ``weight`` it becomes the cost
-    weight·(|p - target|² / (0.1 m)² + |log(R_targetᵀ R)|²).
+    The orientation error is e = vee(skew(R_targetᵀ R)) = sin θ · axis (3,), θ and axis those
+    of R_targetᵀ R: hard rows e = 0 with tr(R_targetᵀ R) >= 0 (θ = 0, not π), or with ``weight``
+    the cost weight·(|p - target|² / (0.1 m)² + |e|²) (|e|² = sin²θ).
     """
+
+    kind = "position"  # its "type" in problem and posture files
 
     frame: str
     frame_id: int
@@ -57,6 +60,16 @@ class PositionTask(Term):
             nlp.minimize(self.name, self.weight * cost)
         nlp.output(f"{self.name}.position", p)
         nlp.output(f"{self.name}.rotation", R)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The task's entry of the posture file."""
+        return {
+            "type": self.kind,
+            "frame": self.frame,
+            "target": np.asarray(self.target).tolist(),
+            "rotation": None if self.R_target is None else np.asarray(self.R_target).tolist(),
+            "weight": self.weight,
+        }
 
     def parameters(self, problem: Instance) -> dict[str, np.ndarray]:
         out = {f"{self.name}.target": self.target}

@@ -17,7 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from .files import is_sequence, load_posture_any, load_sequence, read_json
+from ..io.posture_file import load_posture_any
+from ..io.sequence_file import is_sequence, load_sequence, read_json
 from .scene import bounds, force_scale, scene_mesh
 from .style import (
     ELLIPSE_COLOR,

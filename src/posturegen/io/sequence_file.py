@@ -1,4 +1,5 @@
-"""Posture and sequence files as the figures read them.
+"""The sequence file: its schema, its one writer (:func:`write_sequence`: the climbs' index and
+the viewer's inputs) and its reader (:func:`load_sequence`).
 
 A *sequence file* (JSON, ``"schema": "posturegen.sequence/1"``) lists the stances of a climb::
 
@@ -19,20 +20,10 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError
-from ..verify import SCHEMA, SEQUENCE_SCHEMA, load_posture
-from ..verify import read_json as read_json_file
+from .posture_file import load_posture_any
+from .posture_file import read_json as read_json_file
 
-
-def load_posture_any(posture: str | Path | dict[str, Any]) -> dict[str, Any]:
-    """A posture dict from a posture file path or a dict (both checked like ``verify``)."""
-    if isinstance(posture, dict):
-        if posture.get("schema") != SCHEMA:
-            raise InputError("posture: schema", f'expected "{SCHEMA}"', "give a posture dict")
-        for key in ("robot", "q", "contacts"):
-            if key not in posture:
-                raise InputError(f"posture: {key}", "missing", "give a posture written by solve")
-        return posture
-    return load_posture(posture)
+SEQUENCE_SCHEMA = "posturegen.sequence/1"
 
 
 def read_json(path: str | Path) -> dict[str, Any]:
