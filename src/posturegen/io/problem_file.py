@@ -11,9 +11,9 @@ from typing import Any
 
 import numpy as np
 import pinocchio as pin
-import yaml
 
 from .. import _fields as F
+from .._fields import read_yaml  # the problem file's reader (public here)
 from ..collision.rows import MARGIN, CollisionOptions, excluded_joint_ids
 from ..errors import InputError
 from ..hints import with_hint
@@ -49,23 +49,6 @@ _TOP_OPTIONAL = (
     "name",
     "description",
 )
-
-
-def read_yaml(path: str | Path) -> Any:
-    """Parse a YAML file, or raise an InputError naming the file."""
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError as exc:
-        raise InputError(str(path), "no such file", "give the path of an existing file") from exc
-    except OSError as exc:
-        raise InputError(str(path), f"cannot read it ({exc.strerror})", "check the path") from exc
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark is not None else ""
-        raise InputError(str(path), f"invalid YAML{where}", "fix the YAML syntax") from exc
 
 
 def load_problem(path: str | Path) -> Problem:

@@ -16,7 +16,6 @@ from typing import Any
 
 import numpy as np
 import pinocchio as pin
-import yaml
 
 from .. import _fields as F
 from .._cache import memoize
@@ -276,22 +275,7 @@ def _load_patches(model: pin.Model, data: Any, field_name: str) -> dict[str, Pat
 
 def read_patch_file(path: Path) -> dict[str, Any]:
     """Parse a patch YAML file (see README, "Patch files")."""
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise InputError(
-            "robot.patches",
-            f"cannot read {path}: {exc.strerror}",
-            "give the path of an existing patch YAML file",
-        ) from exc
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise InputError(
-            "robot.patches",
-            f"{path} is not valid YAML ({exc.__class__.__name__})",
-            "fix the YAML syntax",
-        ) from exc
+    data = F.read_yaml(path, "patch YAML file")
     return dict(F.require_mapping(data, "robot.patches"))
 
 

@@ -31,6 +31,11 @@ class Surface:
         """Outward unit normal in world (3,)."""
         return np.array(self.T_world_surface.rotation[:, 2])
 
+    def to_world(self, points_2d: np.ndarray) -> np.ndarray:
+        """(k, 2) points of the surface plane -> (k, 3) world points [m]."""
+        pts = np.column_stack([points_2d, np.zeros(len(points_2d))])
+        return pts @ self.T_world_surface.rotation.T + self.T_world_surface.translation
+
     def to_dict(self) -> dict[str, Any]:
         """The ``surface`` entry of a posture file."""
         return {
