@@ -168,6 +168,19 @@ SEPARATION_STEPS = 6
 SEPARATION_STEP = 0.1
 
 
+def _free_joints(model: pin.Model, contact_joints: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """Velocity and configuration indices of the one-coordinate joints that are not on a
+    chain from the base to a contact joint."""
+    support: set[int] = set()
+    for j in contact_joints:
+        while j > 0:
+            support.add(j)
+            j = int(model.parents[j])
+    free = [j for j in range(2, model.njoints) if j not in support and model.joints[j].nq == 1]
+    movable = np.array([model.joints[j].idx_v for j in free], dtype=int)
+    return movable, np.array([model.joints[j].idx_q for j in free], dtype=int)
+
+
 def separated_start(
     robot: Robot,
     pm: ProxyModel,
@@ -201,14 +214,7 @@ def separated_start(
         return hit.copy()
     model = robot.model
     data = model.createData()
-    support: set[int] = set()
-    for j in contact_joints:
-        while j > 0:
-            support.add(j)
-            j = int(model.parents[j])
-    free = [j for j in range(2, model.njoints) if j not in support and model.joints[j].nq == 1]
-    movable = np.array([model.joints[j].idx_v for j in free], dtype=int)  # velocity indices
-    movable_q = np.array([model.joints[j].idx_q for j in free], dtype=int)
+    movable, movable_q = _free_joints(model, contact_joints)
     q = np.array(q, dtype=float)
     if movable.size == 0 or len(links) == 0:
         return q[7:]  # nothing to part: not worth a cache entry

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from ..checks import VerifyReport
 from ..collision.pairs import pair_rule, unchecked_entries
 from ..collision.rows import env_boxes, excluded_joint_ids
 from ..errors import InputError
@@ -102,6 +103,36 @@ def posture_dict(
         "torque_limit_scale": problem.torque_limit_scale,
         "collision": _collision_dict(problem, margin),
     }
+
+
+def add_solve_fields(
+    posture: dict[str, Any],
+    success: bool,
+    status: str,
+    message: str,
+    iterations: int,
+    solve_time_s: float,
+    ipopt_runs: int,
+    report: VerifyReport,
+) -> None:
+    """The solver's fields of a posture file, added to ``posture``."""
+    posture.update(
+        {
+            "success": success,
+            "status": status,
+            "message": message,
+            "iterations": iterations,
+            "solve_time_s": solve_time_s,
+            "ipopt_runs": ipopt_runs,
+            "max_violation": report.max_violation,
+            "diagnosis": None,
+            "checks": {
+                c.name: {"value": c.value, "tolerance": c.tolerance, "ok": c.ok, "detail": c.detail}
+                for c in report.checks
+            },
+            "notes": list(report.notes),
+        }
+    )
 
 
 def _collision_dict(problem: Problem | Program, margin: float | None) -> dict[str, Any] | None:

@@ -6,6 +6,7 @@ Every mistake raises one :class:`~posturegen.errors.InputError` naming the field
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -167,27 +168,62 @@ def _contact(
     fric = _friction(c["friction"], f"{fld}.friction") if "friction" in c else friction
     yr = _yaw_range(c, fld)
     cop = F.number(c.get("cop_margin", cop_margin), f"{fld}.cop_margin", minimum=0.0)
-    if ctype == "geometric":
-        return GeometricContact(name, patch, surface, mu_c, _ellipse_options(c, fld), yaw_range=yr)
-    if ctype == "support":
-        k = c.get("points", 8)
-        if isinstance(k, bool) or not isinstance(k, int) or k < 4:
-            raise InputError(f"{fld}.points", f"expected an integer >= 4, got {k!r}", "use 8")
-        ell = _ellipse_options(c, fld)
-        return SupportContact(
-            name, patch, surface, mu_c, ell, k, fric, yaw_range=yr, cop_margin=cop
+    common = _Common(name, patch, surface, mu_c, fric, yr, cop)
+    return _BUILDERS[ctype](c, fld, common)
+
+
+@dataclass(frozen=True)
+class _Common:
+    """What every contact type reads from its entry (validated)."""
+
+    name: str
+    patch: Any
+    surface: Any
+    mu: float
+    friction: FrictionModel
+    yaw_range: tuple[float, float] | None
+    cop_margin: float
+
+
+def _geometric(c: Any, fld: str, k: _Common) -> Contact:
+    ell = _ellipse_options(c, fld)
+    return GeometricContact(k.name, k.patch, k.surface, k.mu, ell, yaw_range=k.yaw_range)
+
+
+def _support(c: Any, fld: str, k: _Common) -> Contact:
+    n = c.get("points", 8)
+    if isinstance(n, bool) or not isinstance(n, int) or n < 4:
+        raise InputError(f"{fld}.points", f"expected an integer >= 4, got {n!r}", "use 8")
+    ell = _ellipse_options(c, fld)
+    return SupportContact(
+        k.name,
+        k.patch,
+        k.surface,
+        k.mu,
+        ell,
+        n,
+        k.friction,
+        yaw_range=k.yaw_range,
+        cop_margin=k.cop_margin,
+    )
+
+
+def _inclusive(c: Any, fld: str, k: _Common) -> Contact:
+    return InclusiveContact(k.name, k.patch, k.surface, k.mu, yaw_range=k.yaw_range)
+
+
+def _point(c: Any, fld: str, k: _Common) -> Contact:
+    point = F.vector(c.get("point", [0.0, 0.0]), 2, f"{fld}.point")
+    if not k.patch.polygon.contains(point[None])[0]:
+        raise InputError(
+            f"{fld}.point",
+            "the point is outside the robot patch",
+            "give a point of the patch polygon, in the patch frame",
         )
-    if ctype == "inclusive":
-        return InclusiveContact(name, patch, surface, mu_c, yaw_range=yr)
-    if ctype == "point":
-        point = F.vector(c.get("point", [0.0, 0.0]), 2, f"{fld}.point")
-        if not patch.polygon.contains(point[None])[0]:
-            raise InputError(
-                f"{fld}.point",
-                "the point is outside the robot patch",
-                "give a point of the patch polygon, in the patch frame",
-            )
-        return PointContact(name, patch, surface, mu_c, point, yaw_range=yr)
+    return PointContact(k.name, k.patch, k.surface, k.mu, point, yaw_range=k.yaw_range)
+
+
+def _fixed(c: Any, fld: str, k: _Common) -> Contact:
     if "position" not in c:
         raise InputError(
             f"{fld}.position",
@@ -197,11 +233,23 @@ def _contact(
     pos = F.vector(c["position"], 2, f"{fld}.position")
     yaw = F.angle(c.get("yaw", 0.0), f"{fld}.yaw")
     try:
-        return FixedContact(name, patch, surface, pos, yaw, mu_c, fric, cop_margin=cop)
+        return FixedContact(
+            k.name, k.patch, k.surface, pos, yaw, k.mu, k.friction, cop_margin=k.cop_margin
+        )
     except InputError as exc:
         raise InputError(
             f"{fld}.cop_margin" if exc.field == "cop_margin" else fld, exc.problem, exc.fix
         ) from exc
+
+
+# per contact type: its contact from the entry (CONTACT_TYPES order)
+_BUILDERS = {
+    "fixed": _fixed,
+    "geometric": _geometric,
+    "support": _support,
+    "inclusive": _inclusive,
+    "point": _point,
+}
 
 
 def _task(t: Any, i: int, robot: Robot) -> PositionTask:

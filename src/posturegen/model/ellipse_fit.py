@@ -87,6 +87,20 @@ def largest_inscribed_ellipse(
     return ell if ell is not None else _cold_solve(A, B, formulation)
 
 
+def _mapped_ellipse(xs: FloatArray, Minv: FloatArray, centre: FloatArray) -> Ellipse:
+    """The ellipse of a solution xs = (cx, cy, θ, rx, ry) of a normalized frame, its shape
+    mapped back by Minv (2, 2), centred at ``centre``: rx >= ry, angle in (-π/2, π/2]."""
+    ct, st = math.cos(xs[2]), math.sin(xs[2])
+    shape = Minv @ np.array([[ct * xs[3], -st * xs[4]], [st * xs[3], ct * xs[4]]])
+    Us, sv, _ = np.linalg.svd(shape)
+    angle = math.atan2(Us[1, 0], Us[0, 0])
+    if angle <= -math.pi / 2:
+        angle += math.pi
+    elif angle > math.pi / 2:
+        angle -= math.pi
+    return Ellipse(center=centre, angle=angle, radii=(float(sv[0]), float(sv[1])))
+
+
 # theta is only defined modulo pi (modulo pi/2 with rx <-> ry) and _cold_solve leaves it
 # unbounded: when the normalized optimum is nearly round the theta-curvature (~ (rx - ry)^2)
 # vanishes, IPOPT takes long theta steps and any finite box (tried: [-pi, pi], th0 +- 2 pi)
@@ -137,15 +151,7 @@ def _cold_solve(A: ConvexPolygon, B: ConvexPolygon, formulation: Formulation) ->
     if status not in ("Solve_Succeeded", "Solved_To_Acceptable_Level"):
         raise PosturegenError(f"largest_inscribed_ellipse: IPOPT failed ({status})")
     xs = np.asarray(sol["x"]).ravel()
-    ct, st = math.cos(xs[2]), math.sin(xs[2])
-    shape = Minv @ np.array([[ct * xs[3], -st * xs[4]], [st * xs[3], ct * xs[4]]])
-    Us, sv, _ = np.linalg.svd(shape)
-    angle = math.atan2(Us[1, 0], Us[0, 0])
-    if angle <= -math.pi / 2:
-        angle += math.pi
-    elif angle > math.pi / 2:
-        angle -= math.pi
-    ell = Ellipse(center=c0 + Minv @ xs[:2], angle=angle, radii=(float(sv[0]), float(sv[1])))
+    ell = _mapped_ellipse(xs, Minv, c0 + Minv @ xs[:2])
     scale = math.sqrt(inter.area)
     m = min(ell.inside_margin(A), ell.inside_margin(B))
     if m < -1e-7 * scale:
@@ -321,16 +327,7 @@ def _warm_solve(A: ConvexPolygon, B: ConvexPolygon, formulation: Formulation) ->
     except RuntimeError:  # error_on_fail: IPOPT did not converge from the warm start
         return None
     xs = np.asarray(sol["x"]).ravel()
-    ct, st = math.cos(xs[2]), math.sin(xs[2])
-    shape = r0 * Minv @ np.array([[ct * xs[3], -st * xs[4]], [st * xs[3], ct * xs[4]]])
-    Us, sv, _ = np.linalg.svd(shape)
-    angle = math.atan2(Us[1, 0], Us[0, 0])
-    if angle <= -math.pi / 2:
-        angle += math.pi
-    elif angle > math.pi / 2:
-        angle -= math.pi
-    centre = p0 + r0 * (z[:2] + Minv @ xs[:2])
-    ell = Ellipse(center=centre, angle=angle, radii=(float(sv[0]), float(sv[1])))
+    ell = _mapped_ellipse(xs, r0 * Minv, p0 + r0 * (z[:2] + Minv @ xs[:2]))
     if min(ell.inside_margin(A), ell.inside_margin(B)) < -1e-7 * r0:
         return None
     # the path's ellipse is feasible: a KKT point of IPOPT smaller than it is a spurious one

@@ -115,6 +115,49 @@ class KinematicState:
     p: list[Expr]  # p[i]: (3,) position of joint i in world [m]
 
 
+def _joint_info(model: pin.Model, i: int) -> _JointInfo:
+    """Joint i's placement in its parent, kind, unit axis, actuated index and inertia; a
+    ModelError for a joint posturegen cannot differentiate."""
+    jm = model.joints[i]
+    name = jm.shortname()
+    M = model.jointPlacements[i]
+    inertia = model.inertias[i]
+    axis = np.zeros(3)
+    if name == "JointModelFreeFlyer":
+        if i != 1:
+            raise ModelError(f"joint '{model.names[i]}': free flyer below the root")
+        kind, idx_j = "freeflyer", -1
+    elif name in _REVOLUTE:
+        kind, idx_j = "revolute", jm.idx_v - 6
+        axis[_REVOLUTE[name]] = 1.0
+    elif name in _PRISMATIC:
+        kind, idx_j = "prismatic", jm.idx_v - 6
+        axis[_PRISMATIC[name]] = 1.0
+    elif name == "JointModelRevoluteUnaligned":
+        kind, idx_j = "revolute", jm.idx_v - 6
+        axis = np.asarray(jm.extract().axis, dtype=float).copy()
+    elif name == "JointModelPrismaticUnaligned":
+        kind, idx_j = "prismatic", jm.idx_v - 6
+        axis = np.asarray(jm.extract().axis, dtype=float).copy()
+    else:
+        raise ModelError(
+            f"joint '{model.names[i]}' has type {name}, which posturegen does not support "
+            "(use revolute or prismatic joints with one coordinate)"
+        )
+    if kind != "freeflyer" and jm.nq != 1:
+        raise ModelError(f"joint '{model.names[i]}': expected one coordinate")
+    return _JointInfo(
+        parent=int(model.parents[i]),
+        R_parent_joint=np.array(M.rotation),
+        p_parent_joint=np.array(M.translation),
+        kind=kind,
+        axis=axis / np.linalg.norm(axis) if kind != "freeflyer" else axis,
+        idx_j=idx_j,
+        mass=float(inertia.mass),
+        com_local=np.array(inertia.lever),
+    )
+
+
 class CasadiKinematics:
     """Forward kinematics, frame Jacobians and statics of a free-floating Pinocchio model.
 
@@ -133,47 +176,7 @@ class CasadiKinematics:
             -1, np.eye(3), np.zeros(3), "universe", np.zeros(3), -1, 0.0, np.zeros(3)
         )
         infos: list[_JointInfo] = [universe]
-        for i in range(1, model.njoints):
-            jm = model.joints[i]
-            name = jm.shortname()
-            M = model.jointPlacements[i]
-            inertia = model.inertias[i]
-            axis = np.zeros(3)
-            if name == "JointModelFreeFlyer":
-                if i != 1:
-                    raise ModelError(f"joint '{model.names[i]}': free flyer below the root")
-                kind, idx_j = "freeflyer", -1
-            elif name in _REVOLUTE:
-                kind, idx_j = "revolute", jm.idx_v - 6
-                axis[_REVOLUTE[name]] = 1.0
-            elif name in _PRISMATIC:
-                kind, idx_j = "prismatic", jm.idx_v - 6
-                axis[_PRISMATIC[name]] = 1.0
-            elif name == "JointModelRevoluteUnaligned":
-                kind, idx_j = "revolute", jm.idx_v - 6
-                axis = np.asarray(jm.extract().axis, dtype=float).copy()
-            elif name == "JointModelPrismaticUnaligned":
-                kind, idx_j = "prismatic", jm.idx_v - 6
-                axis = np.asarray(jm.extract().axis, dtype=float).copy()
-            else:
-                raise ModelError(
-                    f"joint '{model.names[i]}' has type {name}, which posturegen does not support "
-                    "(use revolute or prismatic joints with one coordinate)"
-                )
-            if kind != "freeflyer" and jm.nq != 1:
-                raise ModelError(f"joint '{model.names[i]}': expected one coordinate")
-            infos.append(
-                _JointInfo(
-                    parent=int(model.parents[i]),
-                    R_parent_joint=np.array(M.rotation),
-                    p_parent_joint=np.array(M.translation),
-                    kind=kind,
-                    axis=axis / np.linalg.norm(axis) if kind != "freeflyer" else axis,
-                    idx_j=idx_j,
-                    mass=float(inertia.mass),
-                    com_local=np.array(inertia.lever),
-                )
-            )
+        infos += [_joint_info(model, i) for i in range(1, model.njoints)]
         self._joints = infos
         self.total_mass = float(sum(j.mass for j in infos))
         # subtree[i]: joints whose body hangs below joint i (i included)

@@ -21,7 +21,7 @@ from ..collision.rows import (
     CollisionTerm,
     separated_start,
 )
-from ..io.posture_file import posture_dict, write_posture
+from ..io.posture_file import add_solve_fields, posture_dict, write_posture
 from ..verify import VerifyReport, verify_posture
 from .compile import CompiledNLP, is_compiled
 from .problem import Problem, Program, SolverOptions
@@ -367,6 +367,18 @@ class _Loop:
             self.q_check = configuration_from_x(program, run.compiled, run.x)
 
 
+def _message(status: str, report: VerifyReport) -> str:
+    """Why a solve failed, or "verified"."""
+    if status not in _IPOPT_OK:
+        return f"IPOPT did not converge ({status})"
+    if report.ok:
+        return "verified"
+    return "IPOPT converged but the re-check failed: " + "; ".join(
+        f"{c.name} {c.value:.3g} > {c.tolerance:.1g}" + (f" ({c.detail})" if c.detail else "")
+        for c in report.failures
+    )
+
+
 def _result(program: Program, runs: list[_Run], margin: float | None = None) -> Result:
     """The Result of the last run (times and iterations summed over every run)."""
     run = runs[-1]
@@ -377,36 +389,11 @@ def _result(program: Program, runs: list[_Run], margin: float | None = None) -> 
     geometry = program.robot.collision_model() if program.collision_options is not None else None
     report = verify_posture(posture, program.robot.model, geometry)
     status = run.status
-    ipopt_ok = status in _IPOPT_OK
-    success = ipopt_ok and report.ok
-    if success:
-        message = "verified"
-    elif not ipopt_ok:
-        message = f"IPOPT did not converge ({status})"
-    else:
-        message = "IPOPT converged but the re-check failed: " + "; ".join(
-            f"{c.name} {c.value:.3g} > {c.tolerance:.1g}" + (f" ({c.detail})" if c.detail else "")
-            for c in report.failures
-        )
+    success = status in _IPOPT_OK and report.ok
+    message = _message(status, report)
     iterations = sum(r.iterations for r in runs)
     solve_time = sum(r.solve_time_s for r in runs)
-    posture.update(
-        {
-            "success": success,
-            "status": status,
-            "message": message,
-            "iterations": iterations,
-            "solve_time_s": solve_time,
-            "ipopt_runs": len(runs),
-            "max_violation": report.max_violation,
-            "diagnosis": None,
-            "checks": {
-                c.name: {"value": c.value, "tolerance": c.tolerance, "ok": c.ok, "detail": c.detail}
-                for c in report.checks
-            },
-            "notes": list(report.notes),
-        }
-    )
+    add_solve_fields(posture, success, status, message, iterations, solve_time, len(runs), report)
     forces = {
         c["name"]: tuple(
             ContactForce(f["frame"], np.array(f["point"]), np.array(f["force"]))
