@@ -37,7 +37,7 @@ from ..model.robot import load_robot
 from ..solver.diagnose import diagnose as diagnosed
 from ..solver.problem import Problem
 from ..solver.solve import Result, solve
-from ..terms.contacts import FixedContact, FloatingContact
+from .stance import frozen_pose
 
 _SCENE_KEYS = ("robot", "mu", "surfaces", "obstacles", "friction", "costs")
 
@@ -119,12 +119,7 @@ def _kept(
             f"the previous stage has no contact '{name}'",
             f"keep one of: {', '.join(x.name for x in previous.contacts)}",
         )
-    if isinstance(old, FixedContact):
-        position, yaw = np.asarray(old.position), float(old.yaw)
-    elif isinstance(old, FloatingContact):
-        position, yaw = old.realized_pose(previous.robot.model, q_prev)
-    else:  # pragma: no cover - every contact type is one of the two
-        raise InputError(f"{fld}.type", f"cannot keep contact '{name}'", "fix it explicitly")
+    position, yaw = frozen_pose(old, previous.robot.model, q_prev)
     out = {k: v for k, v in c.items() if k in ("name", "mu", "friction", "cop_margin")}
     out.setdefault("mu", float(old.mu))  # a kept contact keeps its friction coefficient
     if hasattr(old, "cop_margin"):  # and its CoP margin (else the stage's options give it)

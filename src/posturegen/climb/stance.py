@@ -6,12 +6,27 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
+import pinocchio as pin
+
 from ..errors import InputError
 from ..solver.problem import Problem
 from ..solver.solve import Result
-from ..terms.contacts import FixedContact
+from ..terms.contacts import Contact, FixedContact, FloatingContact
 from ..terms.cop import DEFAULT_COP_MARGIN
 from ..terms.friction import FrictionModel
+
+
+def frozen_pose(contact: Contact, model: pin.Model, q: np.ndarray) -> tuple[np.ndarray, float]:
+    """Where ``contact`` is at posture q, as the pose (position (2,) [m], yaw [rad]) of the
+    fixed contact it becomes for the next stance: a fixed contact keeps its own (realized to
+    1e-6), a floating one takes its realized pose. The one place a contact is frozen
+    (:func:`next_problem`, the ``keep`` contacts of posturegen.climb.sequence)."""
+    if isinstance(contact, FixedContact):
+        return np.asarray(contact.position), float(contact.yaw)
+    if isinstance(contact, FloatingContact):
+        return contact.realized_pose(model, q)
+    raise InputError("fix", f"cannot freeze contact '{contact.name}'", "fix it explicitly")
 
 
 def next_problem(
@@ -42,7 +57,7 @@ def next_problem(
     if isinstance(old, FixedContact):
         fixed = old  # already fixed: it stays where it is (its realized pose, to 1e-6)
     else:
-        position, yaw = old.realized_pose(problem.robot.model, result.q)
+        position, yaw = frozen_pose(old, problem.robot.model, result.q)
         friction = getattr(old, "friction", FrictionModel())
         margin = getattr(old, "cop_margin", problem.cop_margin)
         fixed = FixedContact(

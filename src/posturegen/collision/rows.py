@@ -390,7 +390,23 @@ def _soft_min_rows(
     checks both equal). The derivatives are built when the returned function is called, that
     is only when a solver is built from the expressions: a structure whose library is in the
     disk cache does not pay for them."""
-    values, soft = [], []  # soft[k]: (exp(-β(v - min v)), its sum) of row k's smooth minimum
+    values, soft = _soft_min_values(rows, margin)
+    z = (
+        ctx.joints
+        if base_rotation is None
+        else ca.vertcat(ctx.base_position, base_rotation, ctx.joints)
+    )
+
+    def build() -> BlockDerivatives:
+        return _soft_min_derivatives(ctx, state, spheres, rows, soft, z, base_rotation)
+
+    return ca.vertcat(*values), build
+
+
+def _soft_min_values(rows: list[list[_Element]], margin: Any) -> tuple[list[Any], list[Any]]:
+    """Each row's softmin_β(v_e) - margin, and soft[k]: (exp(-β(v - min v)), its sum) of row
+    k's smooth minimum (None for a row of one element)."""
+    values, soft = [], []
     for elements in rows:
         v = ca.vertcat(*[e.value for e in elements])
         if len(elements) == 1:
@@ -402,86 +418,141 @@ def _soft_min_rows(
             total = ca.sum1(ex)
             values.append(m - ca.log(total) / SOFT_MIN_BETA - margin)
             soft.append((ex, total))
-    z = (
-        ctx.joints
-        if base_rotation is None
-        else ca.vertcat(ctx.base_position, base_rotation, ctx.joints)
+    return values, soft
+
+
+@dataclass
+class _Sums:
+    """What the rows' derivatives accumulate (see :func:`_soft_min_rows`)."""
+
+    diag: dict[int, Any]  # Σ λ w K_ii per centre
+    cross: dict[tuple[int, int], Any]  # Σ λ w K_ij per pair of centres
+    first: dict[int, Any]  # f_i = Σ λ ∂row/∂c_i
+    jac_rows: list[Any]
+    rank_one: Any  # Σ βλḡḡᵀ in z
+
+
+def _soft_min_derivatives(
+    ctx: BuildContext,
+    state: Any,
+    spheres: list[Sphere],
+    rows: list[list[_Element]],
+    soft: list[Any],
+    z: Any,
+    base_rotation: Any,
+) -> BlockDerivatives:
+    """The rows' Jacobian and the Hessian of λᵀrows in z (see :func:`_soft_min_rows`)."""
+    lam = ca.SX.sym("lam", len(rows))
+    link_of = {i: spheres[i].joint_id for row in rows for e in row for i in e.grads}
+    J = ctx.kin.twist_jacobians(state, sorted(set(link_of.values())), base_rotation)
+    rho = {i: state.R[L] @ spheres[i].center for i, L in link_of.items()}
+    nz = next(iter(J.values())).shape[1] if J else 0
+    sums = _Sums(
+        {i: ca.SX.zeros(3, 3) for i in link_of},
+        {},
+        {i: ca.SX.zeros(3) for i in link_of},
+        [],
+        ca.SX(nz, nz),
     )
+    for k, elements in enumerate(rows):
+        _add_row(sums, k, elements, soft[k], lam, link_of, rho, J, nz)
+    H = _curvature_hessian(sums, link_of, rho, J)
+    Hk = _kinematic_hessian(sums.first, link_of, spheres, state, J, z)
+    if Hk is not None:
+        H = H + Hk
+    jac = ca.vertcat(*sums.jac_rows) if sums.jac_rows else ca.SX(0, nz)
+    return BlockDerivatives(z=z, jacobian=jac, lam=lam, hessian=H)
 
-    def build() -> BlockDerivatives:
-        kin = ctx.kin
-        lam = ca.SX.sym("lam", len(rows))
-        link_of = {i: spheres[i].joint_id for row in rows for e in row for i in e.grads}
-        J = kin.twist_jacobians(state, sorted(set(link_of.values())), base_rotation)
-        rho = {i: state.R[L] @ spheres[i].center for i, L in link_of.items()}
-        nz = next(iter(J.values())).shape[1] if J else 0
-        diag = {i: ca.SX.zeros(3, 3) for i in link_of}  # Σ λ w K_ii per centre
-        cross: dict[tuple[int, int], Any] = {}  # Σ λ w K_ij per pair of centres
-        first = {i: ca.SX.zeros(3) for i in link_of}  # f_i
-        jac_rows, rank_one = [], ca.SX(nz, nz)
-        for k, elements in enumerate(rows):
-            if soft[k] is None:
-                weights: Any = [1.0]
+
+def _add_row(
+    sums: _Sums,
+    k: int,
+    elements: list[_Element],
+    soft_k: Any,
+    lam: Any,
+    link_of: dict[int, int],
+    rho: dict[int, Any],
+    J: dict[int, Any],
+    nz: int,
+) -> None:
+    """Row k's gradient (a Jacobian row), curvature blocks, first-order weights and rank-one
+    term, added to ``sums``."""
+    if soft_k is None:
+        weights: Any = [1.0]
+    else:
+        ex, total = soft_k
+        weights = [ex[n] / total for n in range(len(elements))]
+    gbar: dict[int, Any] = {}
+    for e, w in zip(elements, weights, strict=True):
+        for i, g in e.grads.items():
+            gbar[i] = gbar.get(i, 0) + w * g
+        for (i, j), K in e.curvature.items():
+            if i == j:
+                sums.diag[i] = sums.diag[i] + lam[k] * w * K
             else:
-                ex, total = soft[k]
-                weights = [ex[n] / total for n in range(len(elements))]
-            gbar: dict[int, Any] = {}
-            for e, w in zip(elements, weights, strict=True):
-                for i, g in e.grads.items():
-                    gbar[i] = gbar.get(i, 0) + w * g
-                for (i, j), K in e.curvature.items():
-                    if i == j:
-                        diag[i] = diag[i] + lam[k] * w * K
-                    else:
-                        cross[(i, j)] = cross.get((i, j), 0) + lam[k] * w * K
-            wrench: dict[int, Any] = {}
-            for i, g in gbar.items():
-                first[i] = first[i] + lam[k] * g
-                L = link_of[i]
-                wrench[L] = wrench.get(L, 0) + ca.vertcat(g, ca.cross(rho[i], g))
-            grad = ca.SX(nz, 1)
-            for L, W in wrench.items():
-                grad = grad + J[L].T @ W
-            jac_rows.append(grad.T)
-            if len(gbar) == 1:
-                ((i, g),) = gbar.items()
-                diag[i] = diag[i] + lam[k] * SOFT_MIN_BETA * (g @ g.T)
-            elif gbar:
-                rank_one = rank_one + lam[k] * SOFT_MIN_BETA * (grad @ grad.T)
-        sk = {i: skew(r) for i, r in rho.items()}  # [ρ_i]×, once per sphere
-        blocks: dict[tuple[int, int], _TwistSum] = {}
-        for i, D in diag.items():
-            L = link_of[i]
-            blocks.setdefault((L, L), _TwistSum()).add(D, sk[i], sk[i])
-        for (i, j), X in cross.items():
-            a, b = (i, j) if link_of[i] <= link_of[j] else (j, i)
-            X = X if a == i else X.T
-            key = (link_of[a], link_of[b])
-            blocks.setdefault(key, _TwistSum()).add(X, sk[a], sk[b], twice=key[0] == key[1])
-        H = rank_one
-        for (La, Lb), M in blocks.items():
-            part = J[La].T @ M.matrix() @ J[Lb]
-            H = H + (part if La == Lb else part + part.T)
-        # second derivatives of the kinematics, weighted by the first-order ones
-        syms, vals, weighted = [], [], 0
-        for L in sorted(J):
-            F, G = ca.SX.sym(f"F{L}", 3), ca.SX.sym(f"G{L}", 3, 3)
-            mine = [i for i in first if link_of[i] == L]
-            syms += [F, ca.vec(G)]
-            vals += [
-                sum((first[i] for i in mine), ca.SX.zeros(3)),
-                ca.vec(
-                    sum((first[i] @ ca.DM(spheres[i].center).T for i in mine), ca.SX.zeros(3, 3))
-                ),
-            ]
-            weighted = weighted + ca.dot(F, state.p[L]) + ca.sum1(ca.sum2(G * state.R[L]))
-        if syms:
-            Hk = ca.hessian(weighted, z)[0]
-            H = H + ca.substitute(Hk, ca.vertcat(*syms), ca.vertcat(*vals))
-        jac = ca.vertcat(*jac_rows) if jac_rows else ca.SX(0, nz)
-        return BlockDerivatives(z=z, jacobian=jac, lam=lam, hessian=H)
+                sums.cross[(i, j)] = sums.cross.get((i, j), 0) + lam[k] * w * K
+    wrench: dict[int, Any] = {}
+    for i, g in gbar.items():
+        sums.first[i] = sums.first[i] + lam[k] * g
+        L = link_of[i]
+        wrench[L] = wrench.get(L, 0) + ca.vertcat(g, ca.cross(rho[i], g))
+    grad = ca.SX(nz, 1)
+    for L, W in wrench.items():
+        grad = grad + J[L].T @ W
+    sums.jac_rows.append(grad.T)
+    if len(gbar) == 1:
+        ((i, g),) = gbar.items()
+        sums.diag[i] = sums.diag[i] + lam[k] * SOFT_MIN_BETA * (g @ g.T)
+    elif gbar:
+        sums.rank_one = sums.rank_one + lam[k] * SOFT_MIN_BETA * (grad @ grad.T)
 
-    return ca.vertcat(*values), build
+
+def _curvature_hessian(
+    sums: _Sums, link_of: dict[int, int], rho: dict[int, Any], J: dict[int, Any]
+) -> Any:
+    """The rank-one terms and Σ J_Lᵀ (A_iᵀ K A_j) J_L' over the curvature blocks, summed per
+    pair of links first."""
+    sk = {i: skew(r) for i, r in rho.items()}  # [ρ_i]×, once per sphere
+    blocks: dict[tuple[int, int], _TwistSum] = {}
+    for i, D in sums.diag.items():
+        L = link_of[i]
+        blocks.setdefault((L, L), _TwistSum()).add(D, sk[i], sk[i])
+    for (i, j), X in sums.cross.items():
+        a, b = (i, j) if link_of[i] <= link_of[j] else (j, i)
+        X = X if a == i else X.T
+        key = (link_of[a], link_of[b])
+        blocks.setdefault(key, _TwistSum()).add(X, sk[a], sk[b], twice=key[0] == key[1])
+    H = sums.rank_one
+    for (La, Lb), M in blocks.items():
+        part = J[La].T @ M.matrix() @ J[Lb]
+        H = H + (part if La == Lb else part + part.T)
+    return H
+
+
+def _kinematic_hessian(
+    first: dict[int, Any],
+    link_of: dict[int, int],
+    spheres: list[Sphere],
+    state: Any,
+    J: dict[int, Any],
+    z: Any,
+) -> Any:
+    """Σ_L ∇²_z(F_L·p_L + <G_L, R_L>): the second derivatives of the kinematics weighted by
+    the first-order ones (F_L = Σ f_i, G_L = Σ f_i s_iᵀ held fixed); None without links."""
+    syms, vals, weighted = [], [], 0
+    for L in sorted(J):
+        F, G = ca.SX.sym(f"F{L}", 3), ca.SX.sym(f"G{L}", 3, 3)
+        mine = [i for i in first if link_of[i] == L]
+        syms += [F, ca.vec(G)]
+        vals += [
+            sum((first[i] for i in mine), ca.SX.zeros(3)),
+            ca.vec(sum((first[i] @ ca.DM(spheres[i].center).T for i in mine), ca.SX.zeros(3, 3))),
+        ]
+        weighted = weighted + ca.dot(F, state.p[L]) + ca.sum1(ca.sum2(G * state.R[L]))
+    if not syms:
+        return None
+    Hk = ca.hessian(weighted, z)[0]
+    return ca.substitute(Hk, ca.vertcat(*syms), ca.vertcat(*vals))
 
 
 # CollisionTerm.self_groups per (proxy model, pairs); the model is held (Ref)
