@@ -144,7 +144,7 @@ def _signed_distance(shape, points):
 
 def test_proxies_are_cached_on_disk(tmp_path, monkeypatch):
     """The first look-up fits and writes the cache file, the next one reads it back."""
-    from posturegen.collision.rows import proxies
+    from posturegen.collision import proxies
 
     robot = load_robot(ROBOTS["hrp2"])
     real = proxy_model(robot)

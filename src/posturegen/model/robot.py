@@ -87,7 +87,8 @@ class Robot:
         self.q_upper[self.q_upper > 1e10] = np.inf
         self.joint_names = [self.model.names[i] for i in self.kinematics.actuated_joint_ids()]
         self._collision_model: pin.GeometryModel | None = None
-        self._proxy_model: Any = None  # posturegen.collision.rows.ProxyModel, fitted on first use
+        # posturegen.collision.proxies.ProxyModel, fitted on first use
+        self._proxy_model: Any = None
 
     @property
     def mass(self) -> float:
