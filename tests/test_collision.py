@@ -386,7 +386,8 @@ def test_box_rows_are_conservative_exact_near_and_saturated_far(talos):
     minus the radius, s = ENV_SATURATION): r >= 0 implies the sphere is at least the margin
     from the box, r is within the LSE bound of d - m near the box, and r is the constant s
     (zero gradient) once the sphere is far."""
-    from posturegen.collision.rows import ENV_SATURATION, box_distances
+    from posturegen.collision.boxes import box_distances
+    from posturegen.collision.rows import ENV_SATURATION
 
     data = copy.deepcopy(STAND)
     data["tasks"][0]["target"] = [0.45, -0.3, 0.75]

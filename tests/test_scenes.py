@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from posturegen.climb import scenes
+from posturegen.climb import parts, scenes
 from posturegen.climb.sequence import run_sequence, stage_problem_dict
 from posturegen.errors import ImplausibleValueWarning, InputError
 from posturegen.io.problem_file import problem_from_dict
@@ -193,10 +193,10 @@ def test_inclined_ladder_lifts_the_left_foot_before_placing_it() -> None:
 SCENE_RUNS = sorted(
     {(name, info.robot) for name, info in scenes.SCENES.items()}
     | {(name, "talos") for name in scenes.SCENES}
-    | {("stand-reach", robot) for robot in scenes.ROBOT_NAMES}
+    | {("stand-reach", robot) for robot in parts.ROBOT_NAMES}
 )
 VERIFIED = {
-    *(("stand-reach", robot) for robot in scenes.ROBOT_NAMES),
+    *(("stand-reach", robot) for robot in parts.ROBOT_NAMES),
     ("wall-brace", "talos"),
     ("stairs", "talos"),
     ("stairs", "atlas"),

@@ -14,132 +14,23 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-import pinocchio as pin
-
 from ..errors import InputError
-from ..model.robot import BUNDLED, load_robot
-
-ROBOT_NAMES = BUNDLED
-
-
-def robot_spec(name: str) -> Any:
-    """The ``robot`` entry of a problem for a robot name (every shipped robot, HRP-2 and
-    ATLAS included, is named by itself)."""
-    if name not in BUNDLED:
-        raise InputError(
-            "--robot", f"unknown robot '{name}'", f"use one of: {', '.join(ROBOT_NAMES)}"
-        )
-    return name
-
-
-# --------------------------------------------------------------------------- geometry helpers
-def rect(
-    name: str, centre: list[float], size: tuple[float, float], rpy: Any = (0, 0, 0)
-) -> dict[str, Any]:
-    """A rectangular support surface ``size`` = (x, y) [m] centred at ``centre``."""
-    hx, hy = size[0] / 2, size[1] / 2
-    return {
-        "name": name,
-        "position": [float(v) for v in centre],
-        "rpy": [float(v) for v in rpy],
-        "vertices": [[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]],
-    }
-
-
-def box(name: str, centre: list[float], size: list[float], rpy: Any = (0, 0, 0)) -> dict[str, Any]:
-    """A box obstacle of full extents ``size`` [m]."""
-    return {
-        "name": name,
-        "box": [float(v) for v in size],
-        "position": [float(v) for v in centre],
-        "rpy": [float(v) for v in rpy],
-    }
-
-
-GROUND = rect("ground", [0.0, 0.0, 0.0], (3.0, 3.0))
-
-
-@dataclass(frozen=True)
-class RobotSize:
-    """Numbers that scale a scene to a robot [m]: sole length and width, leg length (sole to
-    hip), shoulder height above the soles, half the distance between the soles, and the
-    shoulder's distance from the sagittal plane, all at the default posture."""
-
-    sole_length: float
-    sole_width: float
-    hip_height: float
-    shoulder_height: float
-    stance_half_width: float
-    shoulder_half_width: float
-
-
-def robot_size(robot_name: str) -> RobotSize:
-    """Measure a robot at its default posture (patch extents and frame heights)."""
-    robot = load_robot(robot_spec(robot_name))
-    model, data = robot.model, robot.model.createData()
-    pin.framesForwardKinematics(model, data, robot.q_init)
-    sole = robot.patch("right_sole")
-    v = sole.polygon.vertices
-    z_sole = data.oMf[sole.frame_id].translation[2]
-    hand = robot.patch("right_hand")
-
-    def top_of_chain(j: int) -> np.ndarray:
-        """Position (3,) of the highest joint between joint j and the root (the shoulder of
-        a hand, the hip of a foot) [m]."""
-        top = data.oMi[j].translation
-        while j > 1:
-            if data.oMi[j].translation[2] > top[2]:
-                top = data.oMi[j].translation
-            j = model.parents[j]
-        return np.array(top)
-
-    y_left = data.oMf[robot.patch("left_sole").frame_id].translation[1]
-    y_right = data.oMf[sole.frame_id].translation[1]
-    return RobotSize(
-        float(np.ptp(v[:, 0])),
-        float(np.ptp(v[:, 1])),
-        float(top_of_chain(sole.joint_id)[2] - z_sole),
-        float(top_of_chain(hand.joint_id)[2] - z_sole),
-        # the feet where the default posture has them (at least 10 cm apart from the middle):
-        # a narrower stance can push the legs' proxies into each other
-        float(max(0.1, abs(y_left - y_right) / 2)),
-        float(abs(top_of_chain(hand.joint_id)[1])),
-    )
-
-
-def _feet_on_ground(x: float = 0.0, half_width: float = 0.1) -> list[dict[str, Any]]:
-    return [
-        {
-            "robot_patch": "left_sole",
-            "surface": "ground",
-            "type": "fixed",
-            "position": [x, half_width],
-        },
-        {
-            "robot_patch": "right_sole",
-            "surface": "ground",
-            "type": "fixed",
-            "position": [x, -half_width],
-        },
-    ]
-
-
-def _keep(*names: str) -> list[dict[str, Any]]:
-    return [{"name": n, "type": "keep"} for n in names]
-
-
-CLIMB_COSTS: dict[str, Any] = {"posture": 1.0, "posture_reference": "default", "forces": 1.0}
-COMMON_OPTIONS: dict[str, Any] = {
-    "self_collision": True,
-    "environment_collision": True,
-    "solver": {"max_iter": 400},
-}
-# The paper's ladders are at the robots' strength: with the default CoP margin (5 mm) the last
-# stage of HRP-2's vertical ladder needs 1.41× CHEST_JOINT1's torque limit, with 3 mm that of
-# TALOS' inclined ladder 1.22× leg_right_3_joint's (posturegen's diagnosis); with 2 mm every
-# ladder stage and climb solves.
-LADDER_OPTIONS: dict[str, Any] = {**COMMON_OPTIONS, "cop_margin": 0.002}
+from ..model.robot import load_robot
+from .parts import (
+    CLIMB_COSTS,
+    COMMON_OPTIONS,
+    GROUND,
+    LADDER_OPTIONS,
+    RobotSize,
+    _feet_on_ground,
+    _foot_task,
+    _keep,
+    _sole_frames,
+    box,
+    rect,
+    robot_size,
+    robot_spec,
+)
 
 
 # --------------------------------------------------------------------------- scenes
@@ -298,17 +189,6 @@ STEP_FOOT_Y = 0.05  # [m] the first foot's target on step 1, right of the middle
 TOE_CLEARANCE = 0.04  # [m]
 
 
-def _sole_frames(robot: str) -> dict[str, str]:
-    """The frames of the robot's sole patches, by patch name."""
-    model = load_robot(robot_spec(robot))
-    return {p: model.patch(p).frame for p in ("left_sole", "right_sole")}
-
-
-def _foot_task(frame: str, target: list[float], weight: float) -> dict[str, Any]:
-    """A soft position task on a sole frame."""
-    return {"type": "position", "frame": frame, "target": target, "weight": weight}
-
-
 # the rails' hand face turns 75° from up-back towards the ladder's middle (measured: at 0° the
 # HRP-2 hand, whose patch is the back of the hand, cannot lie on it; 45° failed on HRP-2 and
 # 90° on Talos), and the rails clear the shoulders by 20 cm (10 cm let Talos' torso proxies
@@ -324,19 +204,16 @@ def _rail_rpy(alpha: float, inward: float) -> tuple[float, float, float]:
     return (-inward, -alpha, 0.0)
 
 
-def ladder_inclined(robot: str, steps: int = 1) -> dict[str, Any]:
-    """Paper V-A: an inclined ladder (60°) with 12 cm steps every 20 cm and two guardrails.
-    The right foot goes on step 1 and the right hand on the right guardrail (both then fixed,
-    bearing forces); the left foot is lifted, then goes on step 2 as a geometric contact whose
-    ellipse radii are at least 40 % of the step's width (its depth, 12 cm)."""
-    size = robot_size(robot)
-    frames = _sole_frames(robot)
-    alpha, rise, depth = math.radians(60.0), 0.2, 0.12
-    width = max(0.5, 2 * (size.shoulder_half_width + RAIL_CLEARANCE))
-    run = rise / math.tan(alpha)  # horizontal distance between steps
-    # x0: where step 0 would be; step 1's front edge is LADDER_GAP in front of the toes
-    x0 = 0.5 * size.sole_length + LADDER_GAP + 0.5 * depth - run
-    n_steps = 2 * max(1, steps) + 2
+def _inclined_surfaces(
+    size: RobotSize,
+    alpha: float,
+    pitch: tuple[float, float, float],
+    step: tuple[float, float],
+    n_steps: int,
+) -> list[dict[str, Any]]:
+    """The ground, ``n_steps`` steps (step k at x0 + k·run, height k·rise; pitch = (x0, run,
+    rise), step = (depth, width)) and the two guardrails climbing at ``alpha``."""
+    (x0, run, rise), (depth, width) = pitch, step
     surfaces = [GROUND]
     for k in range(1, n_steps + 1):
         s = rect(f"step{k}", [x0 + k * run, 0.0, k * rise], (depth, width))
@@ -352,6 +229,23 @@ def ladder_inclined(robot: str, steps: int = 1) -> dict[str, Any]:
         s = rect(f"{side}_rail", [xc, y, zc], (rail_len, 0.05), _rail_rpy(alpha, tilt))
         s["thickness"] = 0.04
         surfaces.append(s)
+    return surfaces
+
+
+def ladder_inclined(robot: str, steps: int = 1) -> dict[str, Any]:
+    """Paper V-A: an inclined ladder (60°) with 12 cm steps every 20 cm and two guardrails.
+    The right foot goes on step 1 and the right hand on the right guardrail (both then fixed,
+    bearing forces); the left foot is lifted, then goes on step 2 as a geometric contact whose
+    ellipse radii are at least 40 % of the step's width (its depth, 12 cm)."""
+    size = robot_size(robot)
+    frames = _sole_frames(robot)
+    alpha, rise, depth = math.radians(60.0), 0.2, 0.12
+    width = max(0.5, 2 * (size.shoulder_half_width + RAIL_CLEARANCE))
+    run = rise / math.tan(alpha)  # horizontal distance between steps
+    # x0: where step 0 would be; step 1's front edge is LADDER_GAP in front of the toes
+    x0 = 0.5 * size.sole_length + LADDER_GAP + 0.5 * depth - run
+    n_steps = 2 * max(1, steps) + 2
+    surfaces = _inclined_surfaces(size, alpha, (x0, run, rise), (depth, width), n_steps)
     # every foothold is as solid as the paper asks of the last one; the hand rests on the
     # rail with an ellipse at least 3 cm across (the rail is 5 cm wide)
     foothold = {"min_radii": [0.4 * depth, 0.4 * depth]}
@@ -456,6 +350,44 @@ def _foot_on_rung(patch: str, k: int, geometric: bool, sole_width: float) -> dic
     return c
 
 
+# Measured on HRP-2, each change alone makes ladder_vertical's last stage fail: the hands on
+# rung 4 (below the shoulders) instead of 5; the right foot first, the hands after it; rungs
+# every 30 cm (22 and 28 cm solve); the 4-face friction pyramid; no foothold task (the right
+# foot then lands 21 cm right of the middle, and the robot cannot stand on it alone); a 4 cm
+# minimum major radius instead of 80 % of the foot's width (which still solves with the
+# standoff at 23, 27 or 30 cm). The demo solves with the standoff from 23 to 30 cm (not 20:
+# the right foot's stage fails) and the foothold task's weight from 0.5 to 2.
+@dataclass(frozen=True)
+class _Rungs:
+    """The stages of a vertical ladder whose rungs' centre line is at x = ``xl``."""
+
+    size: RobotSize
+    sole_frames: dict[str, str]
+    xl: float
+
+    def hand_on(self, h: str, k: int, keep: tuple[str, ...]) -> dict[str, Any]:
+        hand = {"type": "support", "min_radii": [0.3 * RUNG_THICKNESS, 0.03], "mu": HAND_MU}
+        return {
+            "name": f"{h.replace('_', ' ')} on rung {k}",
+            "contacts": [*_keep(*keep), {"robot_patch": h, "surface": f"rung{k}", **hand}],
+        }
+
+    def foothold(self, k: int, y: float) -> list[float]:
+        """The sole frame's target on rung k: its toes on the rung's near half."""
+        return [self.xl - 0.5 * self.size.sole_length - 0.01, y, k * RUNG_SPACING]
+
+    def foot_on(self, foot: str, other: str, k: int) -> dict[str, Any]:
+        y = CLIMB_FOOT_Y if foot == "left_sole" else -CLIMB_FOOT_Y
+        return {
+            "name": f"{foot.split('_')[0]} foot on rung {k}",
+            "contacts": [
+                *_keep(other, "right_hand", "left_hand"),
+                _foot_on_rung(foot, k, True, self.size.sole_width),
+            ],
+            "tasks": [_foot_task(self.sole_frames[foot], self.foothold(k, y), FOOTHOLD_WEIGHT)],
+        }
+
+
 def ladder_vertical(robot: str, steps: int = 0) -> dict[str, Any]:
     """Paper V-B: a vertical ladder with 2.5 cm thick rungs every 25 cm. Standing in front of
     it, the robot puts both hands on the first rung at or above its shoulders, then its right
@@ -465,14 +397,7 @@ def ladder_vertical(robot: str, steps: int = 0) -> dict[str, Any]:
     both hands moved up to ``hand_rung`` rungs above the other foot (one rung more than at the
     start: HRP-2 could not lift its right foot from rung 1 to 3 with its hands on rung 6,
     2.0x its wrist's limit, its knees held behind rung 4, but could with them on rung 7).
-
-    Measured on HRP-2, each change alone makes the last stage fail: the hands on rung 4 (below
-    the shoulders) instead of 5; the right foot first, the hands after it; rungs every 30 cm
-    (22 and 28 cm solve); the 4-face friction pyramid; no foothold task (the right foot then
-    lands 21 cm right of the middle, and the robot cannot stand on it alone); a 4 cm minimum
-    major radius instead of 80 % of the foot's width (which still solves with the standoff at
-    23, 27 or 30 cm). The demo solves with the standoff from 23 to 30 cm (not 20: the right
-    foot's stage fails) and the foothold task's weight from 0.5 to 2."""
+    Measured on HRP-2: see the note above."""
     size = robot_size(robot)
     sole_frames = _sole_frames(robot)
     xl = 0.5 * size.sole_length + LADDER_STANDOFF
@@ -490,29 +415,8 @@ def ladder_vertical(robot: str, steps: int = 0) -> dict[str, Any]:
         box(f"{side}_stile", [xl, y, 1.6], [0.03, 0.04, 3.2])
         for side, y in (("left", half_width + 0.02), ("right", -half_width - 0.02))
     ]
-    hand = {"type": "support", "min_radii": [0.3 * RUNG_THICKNESS, 0.03], "mu": HAND_MU}
-
-    def hand_on(h: str, k: int, keep: tuple[str, ...]) -> dict[str, Any]:
-        return {
-            "name": f"{h.replace('_', ' ')} on rung {k}",
-            "contacts": [*_keep(*keep), {"robot_patch": h, "surface": f"rung{k}", **hand}],
-        }
-
-    def foothold(k: int, y: float) -> list[float]:
-        """The sole frame's target on rung k: its toes on the rung's near half."""
-        return [xl - 0.5 * size.sole_length - 0.01, y, k * RUNG_SPACING]
-
-    def foot_on(foot: str, other: str, k: int) -> dict[str, Any]:
-        y = CLIMB_FOOT_Y if foot == "left_sole" else -CLIMB_FOOT_Y
-        return {
-            "name": f"{foot.split('_')[0]} foot on rung {k}",
-            "contacts": [
-                *_keep(other, "right_hand", "left_hand"),
-                _foot_on_rung(foot, k, True, size.sole_width),
-            ],
-            "tasks": [_foot_task(sole_frames[foot], foothold(k, y), FOOTHOLD_WEIGHT)],
-        }
-
+    ladder = _Rungs(size, sole_frames, xl)
+    hand_on, foothold, foot_on = ladder.hand_on, ladder.foothold, ladder.foot_on
     stages: list[dict[str, Any]] = [
         {"name": "stand", "contacts": _feet_on_ground(half_width=size.stance_half_width)},
         hand_on("right_hand", hand_rung, ("left_sole", "right_sole")),

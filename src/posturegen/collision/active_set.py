@@ -18,15 +18,8 @@ import numpy as np
 import pinocchio as pin
 
 from ..model.kinematics import scratch_data
-from .proxies import ProxyModel, closest
-from .rows import (
-    CollisionOptions,
-    EnvBox,
-    box_distances,
-    env_boxes,
-    excluded_joint_ids,
-    proxy_model,
-)
+from .boxes import CollisionOptions, EnvBox, box_distances, env_boxes, excluded_joint_ids
+from .proxies import ProxyModel, closest, proxy_model
 
 # the closest sphere pairs of each pair of links, and spheres of each link near each box, that
 # enter the program in one round: proxies fitted to 1 cm put thousands of sphere pairs within

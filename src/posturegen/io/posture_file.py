@@ -13,8 +13,8 @@ import numpy as np
 import pinocchio as pin
 
 from ..checks import VerifyReport
+from ..collision.boxes import env_boxes, excluded_joint_ids
 from ..collision.pairs import pair_rule, unchecked_entries
-from ..collision.rows import env_boxes, excluded_joint_ids
 from ..errors import InputError
 from ..solver.problem import Problem, Program
 

@@ -15,7 +15,7 @@ import pinocchio as pin
 
 from .. import _fields as F
 from .._fields import read_yaml  # the problem file's reader (public here)
-from ..collision.rows import MARGIN, CollisionOptions, excluded_joint_ids
+from ..collision.boxes import MARGIN, CollisionOptions, excluded_joint_ids
 from ..errors import InputError
 from ..hints import with_hint
 from ..model.robot import Robot, load_robot

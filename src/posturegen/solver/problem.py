@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from .._cache import Ref
-from ..collision.rows import CollisionOptions
+from ..collision.boxes import CollisionOptions
 from ..model.robot import Robot
 from ..model.scene import Scene
 from ..terms.configuration import ConfigurationTerm
