@@ -299,6 +299,8 @@ def test_solve_never_writes_on_the_problem():
     )
     assert after == before
     assert "collision" not in problem.summary()
+    # the collision rows were the solve's own: its last program had them, the problem has not
+    assert first.constraint_rows > sum(problem.constraint_counts().values())
     posturegen.clear_caches()
     second = solve(problem)
     assert first.success, first.message

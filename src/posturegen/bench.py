@@ -21,7 +21,8 @@ import pinocchio as pin
 from .io.problem_file import problem_from_dict
 from .model.robot import load_bundled
 from .solver import codegen
-from .solver.problem import Problem
+from .solver.compile import symbolic
+from .solver.problem import Problem, Program
 from .solver.solve import solve
 
 
@@ -360,7 +361,8 @@ class _FamilyRun:
             )
         self.builds_before = len(codegen.BUILDS)
         solve(self.problems[0])  # warm-up: builds the solver for this structure
-        self.compiled = self.problems[0].compile()
+        # the layout of the family's program (no solver built: collision rows vary per run)
+        self.compiled = symbolic(Program.of(self.problems[0]))
         self.times: list[float] = []
         self.calls: list[float] = []
         self.iters: list[int] = []
@@ -374,9 +376,8 @@ class _FamilyRun:
         t0 = time.perf_counter()
         result = solve(problem)
         self.calls.append(time.perf_counter() - t0)
-        compiled = problem.compile()  # the last run's structure (collision rows vary)
-        self.rows.append(compiled.n_g)
-        self.c_solves += compiled.library
+        self.rows.append(result.constraint_rows)  # the last run's (collision rows vary)
+        self.c_solves += result.generated_c
         self.times.append(result.solve_time_s)
         self.iters.append(result.iterations)
         if result.success:

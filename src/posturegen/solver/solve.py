@@ -57,6 +57,10 @@ class Result:
     # why no posture was found, one line (posturegen.solver.diagnose.diagnose); "" when not
     # diagnosed
     diagnosis: str = ""
+    # the last IPOPT run's program: its constraint rows (its collision rows included) and
+    # whether it ran generated C (posturegen.solver.codegen)
+    constraint_rows: int = 0
+    generated_c: bool = False
 
     @property
     def max_violation(self) -> float:
@@ -414,6 +418,8 @@ def _result(program: Program, runs: list[_Run], margin: float | None = None) -> 
         cost=run.f,
         verification=report,
         posture=posture,
+        constraint_rows=run.compiled.n_g,
+        generated_c=run.compiled.library,
     )
 
 
