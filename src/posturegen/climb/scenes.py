@@ -232,26 +232,17 @@ def _inclined_surfaces(
     return surfaces
 
 
-def ladder_inclined(robot: str, steps: int = 1) -> dict[str, Any]:
-    """Paper V-A: an inclined ladder (60°) with 12 cm steps every 20 cm and two guardrails.
-    The right foot goes on step 1 and the right hand on the right guardrail (both then fixed,
-    bearing forces); the left foot is lifted, then goes on step 2 as a geometric contact whose
-    ellipse radii are at least 40 % of the step's width (its depth, 12 cm)."""
-    size = robot_size(robot)
-    frames = _sole_frames(robot)
-    alpha, rise, depth = math.radians(60.0), 0.2, 0.12
-    width = max(0.5, 2 * (size.shoulder_half_width + RAIL_CLEARANCE))
-    run = rise / math.tan(alpha)  # horizontal distance between steps
-    # x0: where step 0 would be; step 1's front edge is LADDER_GAP in front of the toes
-    x0 = 0.5 * size.sole_length + LADDER_GAP + 0.5 * depth - run
-    n_steps = 2 * max(1, steps) + 2
-    surfaces = _inclined_surfaces(size, alpha, (x0, run, rise), (depth, width), n_steps)
+def _inclined_stages(
+    size: RobotSize, frames: dict[str, str], pitch: tuple[float, float, float], depth: float
+) -> list[dict[str, Any]]:
+    """The inclined ladder's stages (pitch = (x0, run, rise), see :func:`_inclined_surfaces`)."""
+    x0, run, rise = pitch
     # every foothold is as solid as the paper asks of the last one; the hand rests on the
     # rail with an ellipse at least 3 cm across (the rail is 5 cm wide)
     foothold = {"min_radii": [0.4 * depth, 0.4 * depth]}
     geo = {"type": "geometric", **foothold}
     grip = {"type": "support", "min_radii": [0.015, 0.015]}
-    stages: list[dict[str, Any]] = [
+    return [
         {"name": "stand", "contacts": _feet_on_ground(half_width=size.stance_half_width)},
         {
             "name": "right foot on step 1",
@@ -298,6 +289,23 @@ def ladder_inclined(robot: str, steps: int = 1) -> dict[str, Any]:
             ],
         },
     ]
+
+
+def ladder_inclined(robot: str, steps: int = 1) -> dict[str, Any]:
+    """Paper V-A: an inclined ladder (60°) with 12 cm steps every 20 cm and two guardrails.
+    The right foot goes on step 1 and the right hand on the right guardrail (both then fixed,
+    bearing forces); the left foot is lifted, then goes on step 2 as a geometric contact whose
+    ellipse radii are at least 40 % of the step's width (its depth, 12 cm)."""
+    size = robot_size(robot)
+    frames = _sole_frames(robot)
+    alpha, rise, depth = math.radians(60.0), 0.2, 0.12
+    width = max(0.5, 2 * (size.shoulder_half_width + RAIL_CLEARANCE))
+    run = rise / math.tan(alpha)  # horizontal distance between steps
+    # x0: where step 0 would be; step 1's front edge is LADDER_GAP in front of the toes
+    x0 = 0.5 * size.sole_length + LADDER_GAP + 0.5 * depth - run
+    n_steps = 2 * max(1, steps) + 2
+    surfaces = _inclined_surfaces(size, alpha, (x0, run, rise), (depth, width), n_steps)
+    stages = _inclined_stages(size, frames, (x0, run, rise), depth)
     return {
         "name": "ladder-inclined",
         "description": "inclined ladder (60°): left foot to step 2, ellipse radii >= 40 % of "
@@ -376,6 +384,21 @@ class _Rungs:
         """The sole frame's target on rung k: its toes on the rung's near half."""
         return [self.xl - 0.5 * self.size.sole_length - 0.01, y, k * RUNG_SPACING]
 
+    def climb(self, hand_rung: int, steps: int) -> list[dict[str, Any]]:
+        """The stages after the demo's: each foot ``steps`` times two rungs up, the hands
+        first, ``hand_rung`` rungs above the foot that stays."""
+        out = []
+        feet = {"left_sole": 2, "right_sole": 1}
+        hands = {"left_hand": hand_rung, "right_hand": hand_rung}
+        for _ in range(max(0, steps)):
+            for foot, other in (("right_sole", "left_sole"), ("left_sole", "right_sole")):
+                for h, o in (("right_hand", "left_hand"), ("left_hand", "right_hand")):
+                    hands[h] = feet[other] + hand_rung
+                    out.append(self.hand_on(h, hands[h], ("left_sole", "right_sole", o)))
+                feet[foot] += 2
+                out.append(self.foot_on(foot, other, feet[foot]))
+        return out
+
     def foot_on(self, foot: str, other: str, k: int) -> dict[str, Any]:
         y = CLIMB_FOOT_Y if foot == "left_sole" else -CLIMB_FOOT_Y
         return {
@@ -433,16 +456,7 @@ def ladder_vertical(robot: str, steps: int = 0) -> dict[str, Any]:
         },
         foot_on("left_sole", "right_sole", 2),
     ]
-    feet = {"left_sole": 2, "right_sole": 1}
-    hands = {"left_hand": hand_rung, "right_hand": hand_rung}
-    for _ in range(max(0, steps)):
-        for foot, other in (("right_sole", "left_sole"), ("left_sole", "right_sole")):
-            # the hands first, hand_rung rungs above the foot that stays
-            for h, o in (("right_hand", "left_hand"), ("left_hand", "right_hand")):
-                hands[h] = feet[other] + hand_rung
-                stages.append(hand_on(h, hands[h], ("left_sole", "right_sole", o)))
-            feet[foot] += 2
-            stages.append(foot_on(foot, other, feet[foot]))
+    stages += ladder.climb(hand_rung, steps)
     return {
         "name": "ladder-vertical",
         "description": "vertical ladder, 2.5 cm rungs: left foot to rung 2 (geometric) with "
