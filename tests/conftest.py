@@ -12,7 +12,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from posturegen.robot import load_bundled, shipped_models_dir
+from posturegen.model.robot import load_bundled, shipped_models_dir
 
 # Solvers run CasADi's virtual machine in the tests (no background compilation of every reused
 # structure into ~/.cache); tests/test_codegen.py sets its modes explicitly.
@@ -28,20 +28,16 @@ def talos():
 
 
 def first_run_stops_early(real: Callable, calls: list, record: Callable) -> Callable:
-    """A stand-in for one of solve()'s steps ``real(problem, x0, prior)`` whose first call
-    stops IPOPT after 3 iterations (a failure); each call appends ``record(problem, x0,
-    prior)`` to ``calls``."""
+    """A stand-in for one of solve()'s steps ``real(program, x0, prior)`` (a
+    :class:`posturegen.solver.problem.Program`) whose first call stops IPOPT after 3
+    iterations (a failure); each call appends ``record(program, x0, prior)`` to ``calls``."""
 
-    def step(problem: Any, x0: Any, prior: Any) -> Any:
-        calls.append(record(problem, x0, prior))
+    def step(program: Any, x0: Any, prior: Any) -> Any:
+        calls.append(record(program, x0, prior))
         if len(calls) == 1:
-            options = problem.solver_options
-            problem.solver_options = dataclasses.replace(options, max_iter=3)
-            try:
-                return real(problem, x0, prior)
-            finally:
-                problem.solver_options = options
-        return real(problem, x0, prior)
+            options = dataclasses.replace(program.solver_options, max_iter=3)
+            return real(program.but(solver_options=options), x0, prior)
+        return real(program, x0, prior)
 
     return step
 

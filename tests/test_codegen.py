@@ -18,9 +18,11 @@ import numpy as np
 import pytest
 import yaml
 
-from posturegen import _lifeline, codegen, problem_from_dict, solve
-from posturegen.cli import _demo_dir
-from posturegen.problem import _CACHE
+from posturegen import problem_from_dict, solve
+from posturegen.cli import _demo_dir, main
+from posturegen.errors import InputError
+from posturegen.solver import _lifeline, codegen
+from posturegen.solver.compile import _CACHE, symbolic
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
 needs_cc = pytest.mark.skipif(codegen.compiler() is None, reason="no C compiler")
@@ -40,16 +42,15 @@ def _problem(mode: str, target: list[float] | None = None, torque_cost: bool = F
 
 @pytest.fixture(scope="module")
 def cache(tmp_path_factory):
-    """A fresh library cache for this module; the in-memory solver cache restored after."""
+    """A fresh library cache for this module; the in-memory solver cache emptied before and
+    after."""
     mp = pytest.MonkeyPatch()
     path = tmp_path_factory.mktemp("cache")
     mp.setenv("POSTUREGEN_CACHE", str(path))
-    saved = dict(_CACHE)
     _CACHE.clear()
     yield path
     codegen.wait()
     _CACHE.clear()
-    _CACHE.update(saved)
     mp.undo()
 
 
@@ -73,9 +74,9 @@ def test_library_key_covers_the_compiler_flags(monkeypatch):
 def test_library_key_covers_the_code_of_hand_built_derivatives(monkeypatch):
     """Programs with BlockDerivatives add the package's source digest to their key (their
     derivative functions are built only for a solver made from the expressions)."""
-    from posturegen import problem as P
+    from posturegen.solver import compile as P
 
-    plain = _problem("off")._program()
+    plain = symbolic(_problem("off"))
     assert plain.derivative_key == "" and plain.derivative_functions == {}
     nlp = plain.function
     key = codegen.library_key(nlp, "abc")
@@ -85,8 +86,22 @@ def test_library_key_covers_the_code_of_hand_built_derivatives(monkeypatch):
 
 def test_modes():
     assert codegen.resolve_mode("off") == "off"
-    with pytest.raises(ValueError, match="codegen mode"):
+    with pytest.raises(InputError, match="SolverOptions.codegen: unknown codegen mode 'fast'"):
         codegen.resolve_mode("fast")
+
+
+def test_a_bad_codegen_variable_is_a_one_line_error(monkeypatch, tmp_path, capsys):
+    """$POSTUREGEN_CODEGEN=fast: one line naming the variable and the allowed values, exit 2."""
+    monkeypatch.setenv("POSTUREGEN_CODEGEN", "fast")
+    with pytest.raises(InputError) as err:
+        codegen.resolve_mode(None)
+    assert str(err.value) == (
+        "$POSTUREGEN_CODEGEN: unknown codegen mode 'fast' (use one of: auto, sync, off)"
+    )
+    _CACHE.clear()  # a structure compiled before would not look at the variable
+    code = main(["solve", str(_demo_dir() / "stand-reach.yaml"), "--out", str(tmp_path)])
+    err_lines = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err_lines) == 1 and "$POSTUREGEN_CODEGEN" in err_lines[0]
 
 
 @needs_cc
@@ -181,9 +196,9 @@ def test_prune_keeps_the_most_recently_used_libraries(tmp_path, monkeypatch):
 # ----------------------------------------------------------------- compilers die with us
 CHILD = """
 import json, os, sys, time, uuid
-from posturegen import _lifeline, codegen
+from posturegen.solver import _lifeline, codegen
 from posturegen.cli import _demo_dir
-from posturegen.spec import load_problem
+from posturegen.io.problem_file import load_problem
 
 codegen.HOT_FLAGS = ("-O2",)  # the Hessian then compiles for minutes: it cannot end first
 compiled = load_problem(_demo_dir() / "stand-reach.yaml").compile()

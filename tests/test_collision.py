@@ -4,6 +4,7 @@ gradients, and postures that collide without the rows do not with them (coal on 
 from __future__ import annotations
 
 import copy
+import sys
 
 import casadi as ca
 import numpy as np
@@ -15,13 +16,15 @@ from hypothesis import strategies as st
 
 from posturegen import problem_from_dict, solve
 from posturegen.cli import _demo_dir
-from posturegen.collision import BETA
+from posturegen.collision.mesh_check import mesh_collision_checks
+from posturegen.collision.proxies import proxy_model
+from posturegen.collision.proxy_fit import EXCESS
+from posturegen.collision.rows import BETA
+from posturegen.collision.surface import refine, surface_of
 from posturegen.errors import InputError
-from posturegen.mesh_check import mesh_collision_checks
-from posturegen.proxies import proxy_model
-from posturegen.proxy_fit import EXCESS
-from posturegen.robot import load_robot
-from posturegen.surface import refine, surface_of
+from posturegen.model.robot import load_robot
+from posturegen.solver import compile as compile_module
+from posturegen.solver.problem import Program
 from tests.conftest import first_run_stops_early
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
@@ -69,7 +72,7 @@ def test_fitted_spheres_cover_a_primitive_and_stand_out_at_most_the_excess(half,
     (plus the sampling's own 1 mm) from the solid."""
     import coal
 
-    from posturegen.proxy_fit import fit_joint
+    from posturegen.collision.proxy_fit import fit_joint
 
     a, b, c = half
     shape = {
@@ -141,7 +144,7 @@ def _signed_distance(shape, points):
 
 def test_proxies_are_cached_on_disk(tmp_path, monkeypatch):
     """The first look-up fits and writes the cache file, the next one reads it back."""
-    from posturegen import proxies
+    from posturegen.collision import proxies
 
     robot = load_robot(ROBOTS["hrp2"])
     real = proxy_model(robot)
@@ -164,6 +167,14 @@ def test_proxies_are_cached_on_disk(tmp_path, monkeypatch):
     assert [s.excess for s in second.spheres] == pytest.approx([s.excess for s in first.spheres])
 
 
+def _solved_with_rows(problem):
+    """The Result of solving ``problem`` and what its last IPOPT run solved (the problem with
+    its last collision rows, a :class:`posturegen.solver.problem.Program`)."""
+    solve_module = sys.modules["posturegen.solver.solve"]
+    result, runs = solve_module._solve_continued(Program.of(problem), None, [])
+    return result, runs[-1].program
+
+
 def _fd(fun, x, h=1e-6):
     return np.array([(fun(x + h * e) - fun(x - h * e)) / (2 * h) for e in np.eye(len(x))]).T
 
@@ -173,8 +184,7 @@ def test_distance_gradients_match_finite_differences():
     data = copy.deepcopy(STAND)
     data["options"]["self_collision"] = True
     data["obstacles"] = [{"name": "box", "box": [0.3, 0.3, 0.3], "position": [0.45, -0.12, 0.9]}]
-    problem = problem_from_dict(data)
-    result = solve(problem)  # sets the active collision rows
+    result, problem = _solved_with_rows(problem_from_dict(data))
     compiled = problem.compile()
     assert {"collision.self", "collision.env"} <= set(compiled.g_index)
     x0, p, _, _ = problem.numeric(compiled)
@@ -201,12 +211,9 @@ def test_hand_built_derivatives_match_casadi_and_finite_differences():
     data = copy.deepcopy(STAND)
     data["options"]["self_collision"] = True
     data["obstacles"] = [{"name": "box", "box": [0.3, 0.3, 0.3], "position": [0.45, -0.12, 0.9]}]
-    problem = problem_from_dict(data)
-    solve(problem)  # sets the active collision rows
-    from posturegen import problem as problem_module
-
-    problem_module._PROGRAMS.clear()
-    prog = problem._program()
+    _, problem = _solved_with_rows(problem_from_dict(data))
+    compile_module._PROGRAMS.clear()
+    prog = compile_module.symbolic(problem)
     assert prog._derivatives is None  # built on first use: a solver made from the expressions
     compiled = problem.compile()
     assert set(prog.derivative_functions) == {"jac_g", "hess_lag"} and prog.derivative_key
@@ -336,7 +343,7 @@ def test_a_failed_active_set_loop_restarts_from_the_collision_free_solution(monk
     loop starts again from its solution; the Result counts every IPOPT run."""
     import sys
 
-    solve_module = sys.modules["posturegen.solve"]
+    solve_module = sys.modules["posturegen.solver.solve"]
     calls: list[tuple] = []
     step = first_run_stops_early(
         solve_module._solve_avoiding, calls, lambda _, x0, prior: (x0, len(prior))
@@ -379,13 +386,13 @@ def test_box_rows_are_conservative_exact_near_and_saturated_far(talos):
     minus the radius, s = ENV_SATURATION): r >= 0 implies the sphere is at least the margin
     from the box, r is within the LSE bound of d - m near the box, and r is the constant s
     (zero gradient) once the sphere is far."""
-    from posturegen.collision import ENV_SATURATION, box_distances, row_box_distances
+    from posturegen.collision.boxes import box_distances, row_box_distances
+    from posturegen.collision.rows import ENV_SATURATION
 
     data = copy.deepcopy(STAND)
     data["tasks"][0]["target"] = [0.45, -0.3, 0.75]
     data["obstacles"] = [{"name": "box", "box": [0.2, 0.2, 0.2], "position": [0.45, -0.3, 0.95]}]
-    problem = problem_from_dict(data)
-    result = solve(problem)
+    result, problem = _solved_with_rows(problem_from_dict(data))
     assert result.success, result.message
     term = problem.collision_term
     compiled = problem.compile()
@@ -430,7 +437,7 @@ def test_box_rows_are_conservative_exact_near_and_saturated_far(talos):
 
 
 def _configuration(problem, compiled, x):
-    from posturegen.solve import configuration_from_x
+    from posturegen.solver.solve import configuration_from_x
 
     return configuration_from_x(problem, compiled, np.asarray(x).ravel())
 
@@ -459,7 +466,7 @@ def test_mesh_box_check_finds_what_a_brute_force_check_finds(talos):
     finds one more than TOL_PENETRATION inside."""
     import coal
 
-    from posturegen.mesh_check import TOL_PENETRATION
+    from posturegen.collision.mesh_check import TOL_PENETRATION
 
     model, geometry, q = talos.model, talos.collision_model(), talos.q_init
     data = model.createData()
@@ -534,7 +541,7 @@ def test_the_separated_start_parts_pressed_pairs_and_keeps_the_supports(talos):
     get apart (the sum of their shortfalls shrinks by a fifth), leaves the pairs that the
     reference posture already holds closer than the margin no closer, and the legs (they
     carry the feet) alone."""
-    from posturegen.collision import SEPARATION, separated_start
+    from posturegen.collision.rows import SEPARATION, separated_start
 
     pm = proxy_model(talos)
     model = talos.model
@@ -576,10 +583,10 @@ def test_the_separated_start_parts_pressed_pairs_and_keeps_the_supports(talos):
 
 def test_collision_runs_start_ipopt_with_their_barrier_and_regularization(monkeypatch):
     """The active-set runs use COLLISION_MU_INIT and COLLISION_PERTURBATION (IPOPT's options
-    carry them), the problem's own options are restored afterwards."""
+    carry them), the problem's own options are never written."""
     import sys
 
-    solve_module = sys.modules["posturegen.solve"]
+    solve_module = sys.modules["posturegen.solver.solve"]
     seen = []
     run = solve_module._run_ipopt
 

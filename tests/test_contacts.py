@@ -11,12 +11,13 @@ import numpy as np
 import pytest
 
 from posturegen import problem_from_dict, solve
-from posturegen.contacts import patch_in_surface, polygon_in_surface
-from posturegen.cop import DEFAULT_COP_MARGIN
+from posturegen.climb.stance import next_problem
 from posturegen.errors import InputError
-from posturegen.friction import FrictionModel
-from posturegen.geometry import Ellipse, intersect, largest_inscribed_ellipse
-from posturegen.stance import next_problem
+from posturegen.model.ellipse_fit import largest_inscribed_ellipse
+from posturegen.model.geometry import Ellipse, intersect
+from posturegen.terms.contacts import patch_in_surface, polygon_in_surface
+from posturegen.terms.cop import DEFAULT_COP_MARGIN
+from posturegen.terms.friction import FrictionModel
 from posturegen.verify import verify_posture
 
 

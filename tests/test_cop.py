@@ -13,12 +13,12 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from posturegen import problem_from_dict, solve
-from posturegen.contacts import patch_in_surface, polygon_in_surface
-from posturegen.cop import DEFAULT_COP_MARGIN
+from posturegen.climb.stance import next_problem
 from posturegen.errors import InputError
-from posturegen.geometry import ConvexPolygon, intersect
-from posturegen.min_ellipse import MIN_RADIUS_FRACTION, default_min_radii, inscribed_disc
-from posturegen.stance import next_problem
+from posturegen.model.geometry import ConvexPolygon, intersect
+from posturegen.model.min_ellipse import MIN_RADIUS_FRACTION, default_min_radii, inscribed_disc
+from posturegen.terms.contacts import patch_in_surface, polygon_in_surface
+from posturegen.terms.cop import DEFAULT_COP_MARGIN
 from posturegen.verify import ellipse_depth, verify_posture
 from tests.test_contacts import step_problem
 

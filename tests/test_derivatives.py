@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from posturegen.cli import _demo_dir
-from posturegen.spec import load_problem, problem_from_dict
+from posturegen.io.problem_file import load_problem, problem_from_dict
 
 # floating contacts with every option that adds rows or costs: a support foot (forces on its
 # ellipse's boundary) and a geometric foot (the paper's form, area maximized), both with yaw
@@ -44,7 +44,7 @@ FLOATING = {
 
 
 # a support foot on a 2.5 cm rung: the scaled plane of sec. IV-F, whose CoP-margin row bounds
-# the smallest eigenvalue of BᵀB (posturegen.cop); the other foot fixed (polygon CoP rows)
+# the smallest eigenvalue of BᵀB (posturegen.terms.cop); the other foot fixed (polygon CoP rows)
 THIN = {
     "robot": "talos",
     "surfaces": [
@@ -128,7 +128,8 @@ def test_lagrangian_hessian(program):
 def test_block_derivatives_are_checked_when_declared():
     """A block's own derivatives must have its shape and be taken w.r.t. variables."""
     from posturegen.errors import SolveError
-    from posturegen.problem import NLP, BlockDerivatives, _columns
+    from posturegen.solver.compile import _columns
+    from posturegen.terms.nlp import NLP, BlockDerivatives
 
     nlp = NLP()
     x = nlp.variable("x", 3)

@@ -1,4 +1,5 @@
-"""The diagnosis of a failure (posturegen.elastic, posturegen.diagnose): each cause on a
+"""The diagnosis of a failure (posturegen.terms.elastic, posturegen.solver.diagnose): each cause on
+a
 problem built to have it, its amount checked against the problem, and the elastic program's
 derivatives."""
 
@@ -15,11 +16,13 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from posturegen.active_set import ActiveSet
 from posturegen.cli import _demo_dir, main
-from posturegen.collision import CollisionTerm
-from posturegen.contacts import FrictionModel
-from posturegen.diagnose import (
+from posturegen.collision.active_set import ActiveSet
+from posturegen.collision.rows import CollisionTerm
+from posturegen.errors import ImplausibleValueWarning
+from posturegen.io.problem_file import problem_from_dict
+from posturegen.solver.compile import symbolic
+from posturegen.solver.diagnose import (
     Diagnosis,
     diagnose,
     from_rejection,
@@ -27,10 +30,10 @@ from posturegen.diagnose import (
     relax,
     required_mu,
 )
-from posturegen.elastic import Elastic, category
-from posturegen.errors import ImplausibleValueWarning
-from posturegen.solve import solve
-from posturegen.spec import problem_from_dict
+from posturegen.solver.problem import Program
+from posturegen.solver.solve import solve
+from posturegen.terms.contacts import FrictionModel
+from posturegen.terms.elastic import Elastic, category
 from posturegen.verify import Check, VerifyReport
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
@@ -228,8 +231,8 @@ def test_elastic_program_derivatives_with_collision_rows():
     env_pairs = tuple((int(i), 0) for i in np.flatnonzero(active.allowed[:, 0])[:4])
     assert self_pairs and env_pairs
     term = CollisionTerm(active.pm, self_pairs, env_pairs, active.boxes, 0.002)
-    relaxed = dataclasses.replace(problem, elastic=Elastic(), collision_term=term)
-    prog = relaxed._program()
+    relaxed = Program.of(dataclasses.replace(problem, elastic=Elastic()), collision_term=term)
+    prog = symbolic(relaxed)
     assert {"slack.collision.self", "slack.collision.env", "slack.torque_limits"} <= set(
         prog.x_index
     )
@@ -282,7 +285,7 @@ def test_cli_prints_the_diagnosis_as_one_line_on_stderr(tmp_path, capsys):
 
 
 def test_climb_stage_failure_is_diagnosed(tmp_path):
-    from posturegen.sequence import run_sequence
+    from posturegen.climb.sequence import run_sequence
 
     stage = {k: STAND[k] for k in ("contacts", "tasks")}
     far = copy.deepcopy(stage)

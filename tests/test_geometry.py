@@ -1,4 +1,5 @@
-"""Tests of posturegen.geometry: polygons, intersection, ellipse constraints, largest ellipse."""
+"""Tests of posturegen.model.geometry: polygons, intersection, ellipse constraints, largest
+ellipse."""
 
 from __future__ import annotations
 
@@ -11,17 +12,18 @@ import shapely
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import posturegen.geometry as geo
+import posturegen.model.ellipse_fit as fit
+import posturegen.model.geometry as geo
 from posturegen.errors import InputError, PosturegenError
-from posturegen.geometry import (
-    ConvexPolygon,
-    Ellipse,
+from posturegen.model.ellipse_fit import largest_inscribed_ellipse
+from posturegen.model.ellipse_rows import (
     ellipse_edge_constraints_paper,
     ellipse_edge_constraints_support,
-    intersect,
-    largest_inscribed_ellipse,
 )
+from posturegen.model.geometry import ConvexPolygon, Ellipse, intersect
+from tests.strategies import convex_polygons
 
+COORD3 = st.floats(-3.0, 3.0, allow_nan=False)
 SETTINGS = settings(
     derandomize=True,
     deadline=None,
@@ -217,11 +219,9 @@ def test_halfplanes_edges_and_transforms():
 
 
 @settings(SETTINGS, max_examples=30)
-@given(seed=st.integers(0, 2**31 - 1))
-def test_contains_and_distance_match_shapely(seed):
-    rng = np.random.default_rng(seed)
-    P = random_convex(rng)
-    pts = rng.uniform(-3, 3, size=(200, 2))
+@given(P=convex_polygons(), pts=st.lists(st.tuples(COORD3, COORD3), min_size=1, max_size=200))
+def test_contains_and_distance_match_shapely(P, pts):
+    pts = np.array(pts)
     sp = P.to_shapely()
     dist = P.distance_inside(pts)
     for x, d in zip(pts, dist, strict=True):
@@ -239,10 +239,8 @@ def test_contains_and_distance_match_shapely(seed):
 
 
 @settings(SETTINGS, max_examples=100)
-@given(seed=st.integers(0, 2**31 - 1))
-def test_intersect_area_matches_shapely(seed):
-    rng = np.random.default_rng(seed)
-    A, B = random_convex(rng), random_convex(rng)
+@given(A=convex_polygons(), B=convex_polygons())
+def test_intersect_area_matches_shapely(A, B):
     expected = A.to_shapely().intersection(B.to_shapely()).area
     inter = intersect(A, B)
     if inter is None:
@@ -290,11 +288,14 @@ def test_ellipse_basics():
 
 
 @settings(SETTINGS, max_examples=30)
-@given(seed=st.integers(0, 2**31 - 1))
-def test_inside_margin_is_exact_support_margin(seed):
-    rng = np.random.default_rng(seed)
-    P = random_convex(rng)
-    e = Ellipse(P.centroid + rng.normal(0, 0.2, 2), rng.uniform(-4, 4), rng.uniform(0.01, 1, 2))
+@given(
+    P=convex_polygons(),
+    offset=st.tuples(st.floats(-0.4, 0.4), st.floats(-0.4, 0.4)),
+    angle=st.floats(-4.0, 4.0),
+    radii=st.tuples(st.floats(0.01, 1.0), st.floats(0.01, 1.0)),
+)
+def test_inside_margin_is_exact_support_margin(P, offset, angle, radii):
+    e = Ellipse(P.centroid + np.array(offset), angle, radii)
     pts = e.boundary_points(20000)
     sampled = float(np.min(P.halfplanes()[1][None, :] - pts @ P.halfplanes()[0].T))
     # the exact margin is the min over the continuum of the ellipse: <= every sample, and close
@@ -470,10 +471,10 @@ def test_empty_intersection_and_bad_arguments_raise_input_error():
 
 
 def test_ipopt_failure_raises_posturegen_error(monkeypatch):
-    monkeypatch.setattr(geo, "_SOLVER_CACHE", {})
-    monkeypatch.setattr(geo, "_WARM_CACHE", {})
-    monkeypatch.setitem(geo._IPOPT_OPTS, "ipopt.max_iter", 1)
-    monkeypatch.setitem(geo._WARM_OPTS, "ipopt.max_iter", 0)
+    monkeypatch.setattr(fit, "_SOLVER_CACHE", {})
+    monkeypatch.setattr(fit, "_WARM_CACHE", {})
+    monkeypatch.setitem(fit._IPOPT_OPTS, "ipopt.max_iter", 1)
+    monkeypatch.setitem(fit._WARM_OPTS, "ipopt.max_iter", 0)
     with pytest.raises(PosturegenError) as info:
         largest_inscribed_ellipse(SQUARE, np.asarray(SQUARE) + 0.5)
     assert type(info.value) is PosturegenError
@@ -484,11 +485,11 @@ def test_solver_is_cached_per_formulation_and_sizes():
     A = np.array([[0, 0], [2, 0], [2, 2], [0, 2]], dtype=float)
     B = np.array([[1, -1], [3, 0], [3, 3], [1, 3], [0, 1]], dtype=float)
     largest_inscribed_ellipse(A, B)
-    solver = geo._WARM_CACHE[("support", 4, 5)]
-    path = geo._PATH_CACHE[9]
+    solver = fit._WARM_CACHE[("support", 4, 5)]
+    path = fit._PATH_CACHE[9]
     largest_inscribed_ellipse(A + 0.1, B)
-    assert geo._WARM_CACHE[("support", 4, 5)] is solver
-    assert geo._PATH_CACHE[9] is path
+    assert fit._WARM_CACHE[("support", 4, 5)] is solver
+    assert fit._PATH_CACHE[9] is path
 
 
 @pytest.mark.parametrize("formulation", ["support", "paper"])
@@ -498,8 +499,8 @@ def test_warm_start_is_used_and_agrees_with_the_cold_start(formulation):
     used = 0
     for seed in range(25):
         P, Q, _ = intersecting_pair(1000 + seed)
-        warm = geo._warm_solve(P, Q, formulation)
-        cold = geo._cold_solve(P, Q, formulation)
+        warm = fit._warm_solve(P, Q, formulation)
+        cold = fit._cold_solve(P, Q, formulation)
         if warm is not None:
             used += 1
             assert warm.area == pytest.approx(cold.area, rel=1e-6)
@@ -511,7 +512,7 @@ def test_many_sided_pairs_fall_back_to_the_cold_start():
     t = np.linspace(0, 2 * np.pi, 33)[:-1]
     P = geo.ConvexPolygon(np.c_[np.cos(t), np.sin(t)])
     Q = geo.ConvexPolygon(np.c_[0.5 + np.cos(t + 0.1), 0.2 + np.sin(t + 0.1)])
-    assert geo._warm_solve(P, Q, "support") is None  # the fixed path is too short for 64 rows
+    assert fit._warm_solve(P, Q, "support") is None  # the fixed path is too short for 64 rows
     assert largest_inscribed_ellipse(P, Q).area == pytest.approx(
-        geo._cold_solve(P, Q, "support").area, rel=1e-9
+        fit._cold_solve(P, Q, "support").area, rel=1e-9
     )

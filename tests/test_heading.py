@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from posturegen import problem_from_dict, solve
-from posturegen.placement import fit_yaw_translation
+from posturegen.io.placement import fit_yaw_translation
 
 GROUND = {"name": "ground", "vertices": [[-1, -1], [1, -1], [1, 1], [-1, 1]]}
 YAWS = np.linspace(-np.pi, np.pi, 17)  # steps of π/8

@@ -16,9 +16,9 @@ from hypothesis import strategies as st
 from posturegen.cli import _demo_dir, main
 from posturegen.errors import ImplausibleValueWarning, InputError
 from posturegen.hints import close_names, did_you_mean
+from posturegen.io.problem_file import problem_from_dict
+from posturegen.model.robot import load_bundled
 from posturegen.plausible import chain_length
-from posturegen.robot import load_bundled
-from posturegen.spec import problem_from_dict
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
 

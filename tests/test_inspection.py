@@ -8,14 +8,15 @@ import re
 
 import yaml
 
+from posturegen._cache import BoundedCache
 from posturegen.cli import _demo_dir, main
-from posturegen.inspection import describe, initial_collision_term
-from posturegen.spec import problem_from_dict
+from posturegen.io.problem_file import problem_from_dict
+from posturegen.solver.inspection import describe, initial_collision_term
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
 # 1.4 cm from the right hand's proxies at the initial posture: its sphere-box pairs are near
 BOX = {"name": "box", "box": [0.2, 0.2, 0.2], "position": [0.32, -0.35, 0.75]}
-solve_module = importlib.import_module("posturegen.solve")
+solve_module = importlib.import_module("posturegen.solver.solve")
 
 
 def _with(obstacles: list, self_collision: bool = False) -> dict:
@@ -52,7 +53,9 @@ def test_the_rows_shown_are_those_of_the_first_ipopt_run(monkeypatch):
     data = _with([BOX], self_collision=True)
     problem = problem_from_dict(data)
     shown = _rows(describe(problem))
-    monkeypatch.setattr(solve_module, "_LEARNED", {})  # no pairs from earlier solves
+    monkeypatch.setattr(
+        solve_module, "_LEARNED", BoundedCache("learned", 64)
+    )  # no pairs from earlier solves
     first: list[dict[str, int]] = []
     real = solve_module._run_ipopt
 

@@ -14,8 +14,8 @@ import pinocchio as pin
 import pytest
 
 from posturegen import problem_from_dict, solve
-from posturegen.pairs import pair_rule, reference_configuration
-from posturegen.robot import load_bundled
+from posturegen.collision.pairs import pair_rule, reference_configuration
+from posturegen.model.robot import load_bundled
 from posturegen.verify import verify_file, verify_posture
 from tests.conftest import brute_force_intersections, colliding_pairs, hits_in
 
@@ -55,7 +55,7 @@ def _as_checked(result) -> dict[str, Any]:
     unchecked list a solve with it would write: none of the user's)."""
     posture = copy.deepcopy(result.posture)
     with_rows = problem_from_dict(SQUAT)
-    from posturegen.solve import _collision_dict
+    from posturegen.io.posture_file import _collision_dict
 
     posture["collision"] = _collision_dict(with_rows, None)
     return posture

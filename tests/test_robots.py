@@ -15,7 +15,7 @@ import yaml
 from posturegen import problem_from_dict, solve
 from posturegen.cli import _demo_dir
 from posturegen.errors import InputError
-from posturegen.robot import BUNDLED, Patch, Robot, load_robot
+from posturegen.model.robot import BUNDLED, Patch, Robot, load_robot
 
 ROBOTS = {
     "talos": "talos",

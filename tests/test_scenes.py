@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from posturegen import scenes
+from posturegen.climb import parts, scenes
+from posturegen.climb.sequence import run_sequence, stage_problem_dict
 from posturegen.errors import ImplausibleValueWarning, InputError
-from posturegen.robot import load_robot, shipped_models_dir
-from posturegen.sequence import run_sequence, stage_problem_dict
-from posturegen.spec import problem_from_dict
+from posturegen.io.problem_file import problem_from_dict
+from posturegen.model.robot import load_robot, shipped_models_dir
 from posturegen.verify import verify_file
 from tests.conftest import brute_force_intersections
 
@@ -193,10 +193,10 @@ def test_inclined_ladder_lifts_the_left_foot_before_placing_it() -> None:
 SCENE_RUNS = sorted(
     {(name, info.robot) for name, info in scenes.SCENES.items()}
     | {(name, "talos") for name in scenes.SCENES}
-    | {("stand-reach", robot) for robot in scenes.ROBOT_NAMES}
+    | {("stand-reach", robot) for robot in parts.ROBOT_NAMES}
 )
 VERIFIED = {
-    *(("stand-reach", robot) for robot in scenes.ROBOT_NAMES),
+    *(("stand-reach", robot) for robot in parts.ROBOT_NAMES),
     ("wall-brace", "talos"),
     ("stairs", "talos"),
     ("stairs", "atlas"),

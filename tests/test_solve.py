@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import concurrent.futures
 import copy
 import dataclasses
 import json
@@ -12,6 +13,7 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import posturegen
 from posturegen import load_problem, problem_from_dict, solve
 from posturegen.cli import _demo_dir, main
 from posturegen.verify import verify_posture
@@ -198,7 +200,7 @@ def test_cli_inspect_lists_the_program(capsys):
 def test_posture_reference_is_put_inside_the_limits(lo, width, t):
     """A reference on or past a limit moves min(REFERENCE_INSET, range/4) inside it; one
     already that far inside is kept."""
-    from posturegen.costs import REFERENCE_INSET, reference_inside_limits
+    from posturegen.terms.costs import REFERENCE_INSET, reference_inside_limits
 
     hi = lo + width
     q0 = np.array([lo + t * width])
@@ -213,7 +215,7 @@ def test_a_reference_on_a_limit_no_longer_slows_ipopt_down(monkeypatch):
     """Talos' grippers sit on their upper limit in half-sitting: with the posture reference
     there, the optimum is a degenerate active bound and IPOPT's steps halve each iteration; a
     reference 1 cm inside converges quadratically (12 instead of 16 iterations here)."""
-    import posturegen.costs as costs
+    import posturegen.terms.costs as costs
 
     runs = {}
     for inset in (0.0, costs.REFERENCE_INSET):
@@ -232,7 +234,7 @@ def test_a_run_that_does_not_converge_restarts_from_the_torque_relaxed_solution(
     ×TORQUE_CONTINUATION, and the real one again from that solution; every run counts."""
     import sys
 
-    solve_module = sys.modules["posturegen.solve"]
+    solve_module = sys.modules["posturegen.solver.solve"]
     calls: list[tuple[float, bool]] = []
     step = first_run_stops_early(
         solve_module._solve_continued,
@@ -244,7 +246,7 @@ def test_a_run_that_does_not_converge_restarts_from_the_torque_relaxed_solution(
     result = solve(problem)
     scale = solve_module.TORQUE_CONTINUATION
     assert calls == [(1.0, False), (scale, False), (1.0, True)]
-    assert problem.torque_limit_scale == 1.0  # restored
+    assert problem.torque_limit_scale == 1.0  # never written
     assert result.success, result.message
     assert result.posture["torque_limit_scale"] == 1.0
     assert result.posture["ipopt_runs"] == 3
@@ -265,3 +267,54 @@ def test_importing_posturegen_makes_blas_single_threaded_unless_set(preset):
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == (preset or "1")
+
+
+def _collision_stand() -> dict:
+    data = copy.deepcopy(STAND)
+    data["options"]["self_collision"] = True
+    data["obstacles"] = [{"name": "box", "box": [0.3, 0.3, 0.3], "position": [0.45, -0.12, 0.9]}]
+    return data
+
+
+def test_solve_never_writes_on_the_problem():
+    """solve() is a pure function of the problem: what it shows and keys on is the same after
+    a solve (collision rows, continuations and solver options are the solve's own), and the
+    same problem solved again, from the same caches' state, gives the same posture."""
+    problem = problem_from_dict(_collision_stand())
+    before = (
+        problem.summary(),
+        problem.key(),
+        problem.torque_limit_scale,
+        problem.solver_options,
+        problem.collision_options,
+    )
+    posturegen.clear_caches()
+    first = solve(problem)
+    after = (
+        problem.summary(),
+        problem.key(),
+        problem.torque_limit_scale,
+        problem.solver_options,
+        problem.collision_options,
+    )
+    assert after == before
+    assert "collision" not in problem.summary()
+    # the collision rows were the solve's own: its last program had them, the problem has not
+    assert first.constraint_rows > sum(problem.constraint_counts().values())
+    posturegen.clear_caches()
+    second = solve(problem)
+    assert first.success, first.message
+    np.testing.assert_array_equal(first.q, second.q)
+    assert first.iterations == second.iterations
+
+
+def test_one_problem_solved_from_two_threads_gives_the_serial_results():
+    """Two threads solving the same Problem at once get what one thread gets."""
+    problem = problem_from_dict(copy.deepcopy(STAND))
+    serial = solve(problem)
+    with concurrent.futures.ThreadPoolExecutor(2) as pool:
+        results = list(pool.map(lambda _: solve(problem), range(4)))
+    for r in results:
+        assert r.success, r.message
+        np.testing.assert_array_equal(r.q, serial.q)
+        assert r.iterations == serial.iterations

@@ -9,8 +9,8 @@ contacts (Brossette et al., IROS 2014).
 """
 
 from . import _threads  # noqa: F401  (first: before numpy loads OpenBLAS)
+from ._cache import clear_caches
 from .batch import BatchError, solve_many
-from .diagnose import diagnose
 from .errors import (
     ImplausibleValueWarning,
     InputError,
@@ -19,11 +19,12 @@ from .errors import (
     PosturegenWarning,
     SolveError,
 )
-from .problem import Problem, SolverOptions
-from .robot import Robot, load_robot
-from .scene import Obstacle, Scene, Surface
-from .solve import Result, solve
-from .spec import load_problem, problem_from_dict
+from .io.problem_file import load_problem, problem_from_dict
+from .model.robot import Robot, load_robot
+from .model.scene import Obstacle, Scene, Surface
+from .solver.diagnose import diagnose
+from .solver.problem import Problem, SolverOptions
+from .solver.solve import Result, solve
 from .verify import VerifyReport, verify_posture
 
 __all__ = [
@@ -42,6 +43,7 @@ __all__ = [
     "SolverOptions",
     "Surface",
     "VerifyReport",
+    "clear_caches",
     "diagnose",
     "load_problem",
     "load_robot",

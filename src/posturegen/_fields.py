@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
+import yaml
 
 from .errors import InputError
 from .hints import did_you_mean
@@ -101,3 +103,21 @@ def placement(position: Any, rpy: Any, field: str) -> pin.SE3:
     r = vector(rpy, 3, f"{field}.rpy")
     check_angles(r, f"{field}.rpy")
     return pin.SE3(pin.rpy.rpyToMatrix(*r), p)
+
+
+def read_yaml(path: str | Path, what: str = "file") -> Any:
+    """Parse a YAML file (the package's one YAML reader: problem, patch and sequence files), or
+    raise an InputError naming the file; ``what`` names the file in the fix."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError as exc:
+        raise InputError(str(path), "no such file", f"give the path of an existing {what}") from exc
+    except OSError as exc:
+        raise InputError(str(path), f"cannot read it ({exc.strerror})", "check the path") from exc
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise InputError(str(path), f"invalid YAML{where}", "fix the YAML syntax") from exc

@@ -18,10 +18,12 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .problem import Problem
-from .robot import load_bundled
-from .solve import solve
-from .spec import problem_from_dict
+from .io.problem_file import problem_from_dict
+from .model.robot import load_bundled
+from .solver import codegen
+from .solver.compile import symbolic
+from .solver.problem import Problem, Program
+from .solver.solve import solve
 
 
 @dataclass(frozen=True)
@@ -350,8 +352,6 @@ class _FamilyRun:
     that two families can be interleaved; :meth:`report` collects the statistics."""
 
     def __init__(self, name: str, n: int, seed: int, jit: bool) -> None:
-        from . import codegen
-
         self.name, self.n = name, n
         self.description, generator = FAMILIES[name]
         self.problems = list(generator(n + 1, seed))
@@ -361,7 +361,8 @@ class _FamilyRun:
             )
         self.builds_before = len(codegen.BUILDS)
         solve(self.problems[0])  # warm-up: builds the solver for this structure
-        self.compiled = self.problems[0].compile()
+        # the layout of the family's program (no solver built: collision rows vary per run)
+        self.compiled = symbolic(Program.of(self.problems[0]))
         self.times: list[float] = []
         self.calls: list[float] = []
         self.iters: list[int] = []
@@ -375,9 +376,8 @@ class _FamilyRun:
         t0 = time.perf_counter()
         result = solve(problem)
         self.calls.append(time.perf_counter() - t0)
-        compiled = problem.compile()  # the last run's structure (collision rows vary)
-        self.rows.append(compiled.n_g)
-        self.c_solves += compiled.library
+        self.rows.append(result.constraint_rows)  # the last run's (collision rows vary)
+        self.c_solves += result.generated_c
         self.times.append(result.solve_time_s)
         self.iters.append(result.iterations)
         if result.success:
@@ -386,8 +386,6 @@ class _FamilyRun:
             self.failures.append(f"#{i}: {result.message}")
 
     def report(self) -> FamilyReport:
-        from . import codegen
-
         ms = [1e3 * t for t in self.times]
         compiled = self.compiled
         return FamilyReport(
@@ -417,7 +415,8 @@ class _FamilyRun:
 
 def run_family(name: str, n: int = 100, seed: int = 0, jit: bool = False) -> FamilyReport:
     """Solve n seeded problems of a family and collect statistics. ``jit``: generated C
-    (posturegen.codegen, mode ``sync``: a structure's library is loaded from the disk cache or
+    (posturegen.solver.codegen, mode ``sync``: a structure's library is loaded from the disk cache
+    or
     compiled before its first solve); else CasADi's virtual machine (mode ``off``), so that
     the numbers do not depend on when a background build ends."""
     family = _FamilyRun(name, n, seed, jit)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 
 @dataclass(frozen=True)
 class Check:
@@ -18,6 +20,16 @@ class Check:
     def ok(self) -> bool:
         """value <= tolerance (NaN fails)."""
         return bool(self.value <= self.tolerance)
+
+    @property
+    def ratio(self) -> float:
+        """value / tolerance (<= 1: passed), unitless; a check of tolerance 0 gives 0 when
+        met and inf when not; NaN gives inf."""
+        if not self.value <= self.tolerance:
+            if self.tolerance > 0 and np.isfinite(self.value):
+                return float(self.value / self.tolerance)
+            return float("inf")
+        return float(max(self.value, 0.0) / self.tolerance) if self.tolerance > 0 else 0.0
 
 
 @dataclass(frozen=True)
@@ -39,8 +51,9 @@ class VerifyReport:
 
     @property
     def max_violation(self) -> float:
-        """Largest value/tolerance ratio times the tolerance unit, i.e. the worst raw value."""
-        return max((c.value for c in self.checks), default=0.0)
+        """The worst check relative to its own tolerance: max of :attr:`Check.ratio` (<= 1:
+        every check passed); unitless, so that metres, radians and relative forces compare."""
+        return max((c.ratio for c in self.checks), default=0.0)
 
     def summary(self) -> str:
         """One line per check."""

@@ -10,7 +10,9 @@ import argparse
 import importlib.resources
 import importlib.util
 import json
+import shutil
 import sys
+import time
 import warnings
 from collections.abc import Sequence
 from dataclasses import asdict
@@ -19,8 +21,15 @@ from pathlib import Path
 from .batch.bench import DEFAULT_FAMILY, ScalingRow, batch_scaling, machine_line, table
 from .batch.command import batch_to_dir
 from .batch.sources import read_sources
+from .bench import FAMILIES, FamilyReport, comparison_lines, run_families
+from .climb.scenes import SCENES, scene
+from .climb.sequence import StageReport, run_sequence
 from .errors import PosturegenError, PosturegenWarning
 from .hints import with_hint
+from .io.problem_file import load_problem, read_yaml
+from .solver.diagnose import solve_diagnosed
+from .solver.inspection import describe
+from .verify import verify_file
 
 EXIT_OK, EXIT_NOT_FOUND, EXIT_INPUT = 0, 1, 2
 
@@ -35,8 +44,6 @@ def demo_names() -> list[str]:
 
 
 def _solve_to(problem_path: Path, out: Path, quiet: bool = False, png: str | None = None) -> int:
-    from .diagnose import solve_diagnosed
-    from .spec import load_problem
 
     result = solve_diagnosed(load_problem(problem_path))
     path = result.write(out / "posture.json")
@@ -78,17 +85,12 @@ def cmd_batch(args: argparse.Namespace) -> int:
 
 def cmd_inspect(args: argparse.Namespace) -> int:
     """posturegen inspect PROBLEM.yaml: the program's variables, constraints and costs."""
-    from .inspection import describe
-    from .spec import load_problem
-
     print(describe(load_problem(Path(args.problem))))
     return EXIT_OK
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
     """posturegen verify POSTURE.json"""
-    from .verify import verify_file
-
     report = verify_file(args.posture)
     print(report.summary())
     print("posture verified" if report.ok else "posture REJECTED")
@@ -97,9 +99,6 @@ def cmd_verify(args: argparse.Namespace) -> int:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """posturegen demo --list | posturegen demo NAME --out DIR [--robot NAME]"""
-    from .scenes import SCENES, scene
-    from .spec import read_yaml
-
     names = demo_names()
     if args.list or args.name is None:
         for name, info in SCENES.items():
@@ -124,8 +123,6 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 def cmd_climb(args: argparse.Namespace) -> int:
     """posturegen climb SCENE --robot NAME --steps K --out DIR"""
-    from .scenes import SCENES, scene
-
     climbs = [n for n, info in SCENES.items() if info.climb_steps is not None]
     if args.scene not in climbs:
         hint = with_hint(args.scene, climbs, f"known: {', '.join(climbs)}")
@@ -140,10 +137,6 @@ def cmd_climb(args: argparse.Namespace) -> int:
 def _run_sequence(seq: dict, out: Path, quiet: bool, png: str | None, final: bool) -> int:
     """Run a sequence with a progress bar; with ``final`` also copy the last posture to
     DIR/posture.json. Exit 0 when every stage was verified, 1 otherwise (said on stderr)."""
-    import shutil
-    import time
-
-    from .sequence import StageReport, run_sequence
 
     robot = seq["robot"] if isinstance(seq["robot"], str) else seq["robot"].get("name")
     t_start = time.perf_counter()
@@ -237,8 +230,6 @@ def _add_png_option(p: argparse.ArgumentParser) -> None:
 
 def cmd_bench(args: argparse.Namespace) -> int:
     """posturegen bench [--json FILE] | posturegen bench --batch"""
-    from .bench import FAMILIES, FamilyReport, comparison_lines, run_families
-
     names = args.family or list(FAMILIES)
     for name in names:
         if name not in FAMILIES:

@@ -1,7 +1,7 @@
 """Independent numeric re-check of a posture with Pinocchio (never with the solver's CasADi).
 
 It reads only the posture's public content (the posture-file dict), so ``posturegen verify
-FILE`` and :func:`posturegen.solve.solve` run exactly the same checks:
+FILE`` and :func:`posturegen.solver.solve.solve` run exactly the same checks:
 
 - q: right size, finite, unit base quaternion, within joint limits;
 - torques within effort limits, and the static equilibrium ``[0; τ] + Σ J_iᵀ f_i - g(q) = 0``
@@ -16,7 +16,7 @@ FILE`` and :func:`posturegen.solve.solve` run exactly the same checks:
 
 from __future__ import annotations
 
-import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -24,13 +24,11 @@ import numpy as np
 import pinocchio as pin
 
 from .checks import Check, VerifyReport
+from .collision.mesh_check import mesh_collision_checks
 from .errors import InputError
-from .geometry import ConvexPolygon, Ellipse, intersect
-from .kinematics import scratch_data
-from .mesh_check import mesh_collision_checks
-
-SCHEMA = "posturegen.posture/1"
-SEQUENCE_SCHEMA = "posturegen.sequence/1"  # climbs: see posturegen.sequence
+from .io.posture_file import load_posture, model_of_posture
+from .model.geometry import ConvexPolygon, Ellipse, intersect
+from .model.kinematics import scratch_data
 
 # Tolerances of the re-check. Lengths [m], angles [rad], forces relative to the weight.
 TOL_JOINT = 1e-6  # [rad] or [m]
@@ -50,6 +48,40 @@ def _poly_in_plane(T_world_plane: pin.SE3, points_world: np.ndarray) -> np.ndarr
     return (points_world - T_world_plane.translation) @ T_world_plane.rotation
 
 
+@dataclass
+class _Worst:
+    """The worst value so far of each contact check (see :func:`_check_contact`)."""
+
+    geometry: float = 0.0  # [m] and [rad]
+    inside: float = 0.0  # [m]
+    friction: float = 0.0  # relative to the weight
+    ellipse_size: float = 0.0  # [m]
+    cop: float = 0.0  # [m]
+
+    def checks(self) -> list[Check]:
+        return [
+            Check("contact geometry", self.geometry, TOL_GEOMETRY),
+            Check("contact points inside polygons", max(self.inside, 0.0), TOL_GEOMETRY),
+            Check("friction cones", max(self.friction, 0.0), TOL_FRICTION),
+            Check("contact ellipse size", max(self.ellipse_size, 0.0), TOL_GEOMETRY),
+            Check("centre of pressure margin", max(self.cop, 0.0), TOL_GEOMETRY),
+        ]
+
+
+@dataclass(frozen=True)
+class _ContactFrames:
+    """A contact's surface and robot patch in the world at the posture."""
+
+    T_ws: pin.SE3  # surface frame
+    P_s: ConvexPolygon  # surface polygon (surface frame)
+    T_wc: pin.SE3  # robot patch frame
+    P_c: ConvexPolygon  # patch polygon (patch frame)
+
+    @property
+    def T_sc(self) -> pin.SE3:
+        return self.T_ws.inverse() * self.T_wc
+
+
 def verify_posture(
     posture: dict[str, Any], model: pin.Model, geometry: pin.GeometryModel | None = None
 ) -> VerifyReport:
@@ -57,31 +89,15 @@ def verify_posture(
     ``collision`` entry, also on the real collision meshes (``geometry``, loaded from the
     posture's URDF when not given)."""
     data = scratch_data(model)
-    checks: list[Check] = []
     q = np.asarray(posture["q"], dtype=float)
     if q.shape != (model.nq,) or not np.all(np.isfinite(q)):
         return VerifyReport((Check("q", np.inf, 0.0, f"expected {model.nq} finite numbers"),))
-    checks.append(Check("base quaternion norm", abs(np.linalg.norm(q[3:7]) - 1.0), 1e-9))
-    lo, hi = model.lowerPositionLimit[7:], model.upperPositionLimit[7:]
-    excess = np.maximum(lo - q[7:], q[7:] - hi)
-    worst = int(np.argmax(excess)) if excess.size else 0
-    checks.append(
-        Check(
-            "joint limits",
-            float(max(excess.max(initial=0.0), 0.0)),
-            TOL_JOINT,
-            f"joint {model.names[worst + 2]}",
-        )
-    )
+    checks = [Check("base quaternion norm", abs(np.linalg.norm(q[3:7]) - 1.0), 1e-9)]
+    checks.append(_joint_limits(model, q))
     tau = np.asarray(posture["torques"], dtype=float)
     if tau.shape != (model.nv - 6,):
         return VerifyReport((*checks, Check("torques", np.inf, 0.0, f"expected {model.nv - 6}")))
-    effort = np.array(model.effortLimit[6:], dtype=float)
-    finite = np.isfinite(effort) & (effort > 0) & (effort < 1e10)
-    limit = effort * float(posture.get("torque_limit_scale", 1.0))
-    over = np.where(finite, (np.abs(tau) - limit) / np.where(finite, effort, 1.0), 0.0)
-    checks.append(Check("torque limits", float(max(over.max(initial=0.0), 0.0)), TOL_TORQUE))
-
+    checks.append(_torque_limits(model, tau, float(posture.get("torque_limit_scale", 1.0))))
     pin.forwardKinematics(model, data, q)
     pin.updateFramePlacements(model, data)
     pin.computeJointJacobians(model, data, q)
@@ -91,87 +107,164 @@ def verify_posture(
             (*checks, Check("gravity", np.inf, 0.0, "expected 3 finite numbers, not 0"))
         )
     weight = pin.computeTotalMass(model) * float(np.linalg.norm(gravity))
-    residual = _gravity_torques(model, data, q, gravity)
+    residual = _gravity_torques(model, data, q, gravity)  # (nv,) becomes the equilibrium's
     residual[6:] += tau
-    geo, fric, inside, ellipse_size, cop = 0.0, 0.0, 0.0, 0.0, 0.0
+    worst = _Worst()
     for contact in posture.get("contacts", []):
-        surf = contact["surface"]
-        T_ws = pin.SE3(np.array(surf["placement"], dtype=float))
-        P_s = ConvexPolygon(np.array(surf["vertices"], dtype=float))
-        rp = contact["robot_patch"]
-        fid = model.getFrameId(rp["frame"])
-        T_wc = data.oMf[fid] * pin.SE3(np.array(rp["placement"], dtype=float))
-        P_c = ConvexPolygon(np.array(rp["vertices"], dtype=float))
-        # coplanarity with opposite normals (paper eq. 2)
-        T_sc = T_ws.inverse() * T_wc
-        geo = max(
-            geo,
-            abs(T_sc.translation[2]),
-            abs(T_sc.rotation[2, 0]),
-            abs(T_sc.rotation[2, 1]),
-            abs(T_sc.rotation[2, 2] + 1.0),
-        )
-        if contact.get("pose") is not None and contact["type"] == "fixed":
-            pos = np.asarray(contact["pose"]["position"], dtype=float)
-            yaw = float(contact["pose"]["yaw"])
-            geo = max(
-                geo,
-                float(np.abs(T_sc.translation[:2] - pos).max()),
-                abs(_wrap(_yaw(T_sc) - yaw)),
-            )
-        if contact.get("yaw_range") is not None:  # a floating contact's yaw bounds [rad]
-            lo, hi = (float(v) for v in contact["yaw_range"])
-            geo = max(geo, abs(_wrap(_yaw(T_sc) - 0.5 * (lo + hi))) - 0.5 * (hi - lo))
-        mu = float(contact["mu"])
-        for f in contact.get("forces", []):
-            p_w = np.asarray(f["point"], dtype=float)
-            f_w = np.asarray(f["force"], dtype=float)
-            # the point must lie on both polygons: in the surface plane and inside both
-            p_s = _poly_in_plane(T_ws, p_w[None])[0]
-            p_c = _poly_in_plane(T_wc, p_w[None])[0]
-            geo = max(geo, abs(p_s[2]))
-            inside = max(
-                inside,
-                float(-P_s.distance_inside(p_s[None, :2])[0]),
-                float(-P_c.distance_inside(p_c[None, :2])[0]),
-            )
-            n = T_ws.rotation[:, 2]
-            fn = float(n @ f_w)
-            ft = float(np.linalg.norm(f_w - fn * n))
-            fric = max(fric, (ft - mu * fn) / weight, -fn / weight)
-            # generalized force of f at p: Jᵀ f with J the point's LOCAL_WORLD_ALIGNED Jacobian
-            fr = model.frames[model.getFrameId(f["frame"])]
-            jid = fr.parentJoint
-            J = pin.getJointJacobian(model, data, jid, pin.LOCAL_WORLD_ALIGNED)
-            lever = p_w - data.oMi[jid].translation
-            residual += J[:3].T @ f_w + J[3:].T @ np.cross(lever, f_w)
-        cop = max(cop, cop_shortfall(contact, T_ws, P_s, T_wc, P_c, weight))
-        if contact["type"] == "inclusive":
-            v_c = np.column_stack([P_c.vertices, np.zeros(P_c.n)])
-            v_w = v_c @ T_wc.rotation.T + T_wc.translation
-            inside = max(
-                inside, float(-P_s.distance_inside(_poly_in_plane(T_ws, v_w)[:, :2]).min())
-            )
-        if contact["type"] == "point":
-            p_s = _poly_in_plane(T_ws, np.asarray(contact["point"]["world"], dtype=float)[None])
-            inside = max(inside, float(-P_s.distance_inside(p_s[:, :2])[0]))
-        ell = contact.get("ellipse")
-        if ell is not None:
-            inside = max(inside, _ellipse_outside(ell, T_ws, P_s, T_wc, P_c))
-            radii = sorted((float(r) for r in ell["radii"]), reverse=True)
-            wanted = sorted((float(r) for r in ell.get("min_radii", (0, 0))), reverse=True)
-            small = max(wanted[0] - radii[0], wanted[1] - radii[1])
-            area_short = float(ell.get("min_area", 0.0)) - np.pi * radii[0] * radii[1]
-            ellipse_size = max(ellipse_size, small, area_short / max(radii[0], 1e-9))
-    checks.append(Check("contact geometry", geo, TOL_GEOMETRY))
-    checks.append(Check("contact points inside polygons", max(inside, 0.0), TOL_GEOMETRY))
-    checks.append(Check("friction cones", max(fric, 0.0), TOL_FRICTION))
-    checks.append(Check("contact ellipse size", max(ellipse_size, 0.0), TOL_GEOMETRY))
-    checks.append(Check("centre of pressure margin", max(cop, 0.0), TOL_GEOMETRY))
+        _check_contact(contact, model, data, weight, residual, worst)
+    checks += worst.checks()
     scale = np.full(model.nv, weight)
     checks.append(
         Check("static equilibrium", float(np.abs(residual / scale).max()), TOL_EQUILIBRIUM)
     )
+    checks.append(_tasks(posture, model, data))
+    notes: list[str] = []
+    if posture.get("collision") is not None:
+        if geometry is None:
+            geometry = geometry_of_posture(posture, model)
+        mesh_checks, notes = mesh_collision_checks(posture, model, geometry, q)
+        checks.extend(mesh_checks)
+    return VerifyReport(tuple(checks), tuple(notes))
+
+
+def _joint_limits(model: pin.Model, q: np.ndarray) -> Check:
+    """How far [rad or m] the worst joint is beyond its limits."""
+    lo, hi = model.lowerPositionLimit[7:], model.upperPositionLimit[7:]
+    excess = np.maximum(lo - q[7:], q[7:] - hi)
+    worst = int(np.argmax(excess)) if excess.size else 0
+    value = float(max(excess.max(initial=0.0), 0.0))
+    return Check("joint limits", value, TOL_JOINT, f"joint {model.names[worst + 2]}")
+
+
+def _torque_limits(model: pin.Model, tau: np.ndarray, scale: float) -> Check:
+    """How far the worst |τ_j| is beyond scale·effort_j, relative to effort_j."""
+    effort = np.array(model.effortLimit[6:], dtype=float)
+    finite = np.isfinite(effort) & (effort > 0) & (effort < 1e10)
+    limit = effort * scale
+    over = np.where(finite, (np.abs(tau) - limit) / np.where(finite, effort, 1.0), 0.0)
+    return Check("torque limits", float(max(over.max(initial=0.0), 0.0)), TOL_TORQUE)
+
+
+def _frames(contact: dict[str, Any], model: pin.Model, data: pin.Data) -> _ContactFrames:
+    surf, rp = contact["surface"], contact["robot_patch"]
+    T_wc = data.oMf[model.getFrameId(rp["frame"])] * pin.SE3(np.array(rp["placement"], float))
+    return _ContactFrames(
+        pin.SE3(np.array(surf["placement"], dtype=float)),
+        ConvexPolygon(np.array(surf["vertices"], dtype=float)),
+        T_wc,
+        ConvexPolygon(np.array(rp["vertices"], dtype=float)),
+    )
+
+
+def _check_contact(
+    contact: dict[str, Any],
+    model: pin.Model,
+    data: pin.Data,
+    weight: float,
+    residual: np.ndarray,
+    worst: _Worst,
+) -> None:
+    """One contact's checks into ``worst``; its forces' generalized forces added to
+    ``residual`` (nv,)."""
+    f = _frames(contact, model, data)
+    T_sc = f.T_sc
+    # coplanarity with opposite normals (paper eq. 2)
+    worst.geometry = max(
+        worst.geometry,
+        abs(T_sc.translation[2]),
+        abs(T_sc.rotation[2, 0]),
+        abs(T_sc.rotation[2, 1]),
+        abs(T_sc.rotation[2, 2] + 1.0),
+    )
+    worst.geometry = max(worst.geometry, _pose_error(contact, T_sc))
+    _check_forces(contact, f, model, data, weight, residual, worst)
+    worst.cop = max(worst.cop, cop_shortfall(contact, f.T_ws, f.P_s, f.T_wc, f.P_c, weight))
+    inside = _INSIDE.get(contact["type"])
+    if inside is not None:
+        worst.inside = max(worst.inside, inside(contact, f))
+    ell = contact.get("ellipse")
+    if ell is not None:
+        worst.inside = max(worst.inside, _ellipse_outside(ell, f.T_ws, f.P_s, f.T_wc, f.P_c))
+        worst.ellipse_size = max(worst.ellipse_size, _ellipse_shortfall(ell))
+
+
+def _pose_error(contact: dict[str, Any], T_sc: pin.SE3) -> float:
+    """[m] and [rad]: a fixed contact's distance from its given pose, a floating contact's yaw
+    beyond its range (0 for the others)."""
+    err = 0.0
+    if contact.get("pose") is not None and contact["type"] == "fixed":
+        pos = np.asarray(contact["pose"]["position"], dtype=float)
+        yaw = float(contact["pose"]["yaw"])
+        err = max(float(np.abs(T_sc.translation[:2] - pos).max()), abs(_wrap(_yaw(T_sc) - yaw)))
+    if contact.get("yaw_range") is not None:  # a floating contact's yaw bounds [rad]
+        lo, hi = (float(v) for v in contact["yaw_range"])
+        err = max(err, abs(_wrap(_yaw(T_sc) - 0.5 * (lo + hi))) - 0.5 * (hi - lo))
+    return err
+
+
+def _check_forces(
+    contact: dict[str, Any],
+    f: _ContactFrames,
+    model: pin.Model,
+    data: pin.Data,
+    weight: float,
+    residual: np.ndarray,
+    worst: _Worst,
+) -> None:
+    """Each force's point on both polygons, its friction cone, and its Jᵀf in ``residual``."""
+    mu = float(contact["mu"])
+    n = f.T_ws.rotation[:, 2]
+    for force in contact.get("forces", []):
+        p_w = np.asarray(force["point"], dtype=float)
+        f_w = np.asarray(force["force"], dtype=float)
+        # the point must lie on both polygons: in the surface plane and inside both
+        p_s = _poly_in_plane(f.T_ws, p_w[None])[0]
+        p_c = _poly_in_plane(f.T_wc, p_w[None])[0]
+        worst.geometry = max(worst.geometry, abs(p_s[2]))
+        worst.inside = max(
+            worst.inside,
+            float(-f.P_s.distance_inside(p_s[None, :2])[0]),
+            float(-f.P_c.distance_inside(p_c[None, :2])[0]),
+        )
+        fn = float(n @ f_w)
+        ft = float(np.linalg.norm(f_w - fn * n))
+        worst.friction = max(worst.friction, (ft - mu * fn) / weight, -fn / weight)
+        # generalized force of f at p: Jᵀ f with J the point's LOCAL_WORLD_ALIGNED Jacobian
+        jid = model.frames[model.getFrameId(force["frame"])].parentJoint
+        J = pin.getJointJacobian(model, data, jid, pin.LOCAL_WORLD_ALIGNED)
+        lever = p_w - data.oMi[jid].translation
+        residual += J[:3].T @ f_w + J[3:].T @ np.cross(lever, f_w)
+
+
+def _inclusive_outside(contact: dict[str, Any], f: _ContactFrames) -> float:
+    """[m] how far the patch's worst vertex is outside the surface (inclusive contact)."""
+    v_c = np.column_stack([f.P_c.vertices, np.zeros(f.P_c.n)])
+    v_w = v_c @ f.T_wc.rotation.T + f.T_wc.translation
+    return float(-f.P_s.distance_inside(_poly_in_plane(f.T_ws, v_w)[:, :2]).min())
+
+
+def _point_outside(contact: dict[str, Any], f: _ContactFrames) -> float:
+    """[m] how far a point contact's point is outside the surface."""
+    p_s = _poly_in_plane(f.T_ws, np.asarray(contact["point"]["world"], dtype=float)[None])
+    return float(-f.P_s.distance_inside(p_s[:, :2])[0])
+
+
+# per contact type: what must lie inside the surface besides the force points
+_INSIDE = {"inclusive": _inclusive_outside, "point": _point_outside}
+
+
+def _ellipse_shortfall(ell: dict[str, Any]) -> float:
+    """[m] how far a contact ellipse's radii are short of its minimum radii, or its area of
+    its minimum area (divided by the larger radius)."""
+    radii = sorted((float(r) for r in ell["radii"]), reverse=True)
+    wanted = sorted((float(r) for r in ell.get("min_radii", (0, 0))), reverse=True)
+    small = max(wanted[0] - radii[0], wanted[1] - radii[1])
+    area_short = float(ell.get("min_area", 0.0)) - np.pi * radii[0] * radii[1]
+    return max(small, area_short / max(radii[0], 1e-9))
+
+
+def _tasks(posture: dict[str, Any], model: pin.Model, data: pin.Data) -> Check:
+    """[m] and [rad] the worst hard task error (position, and log3 of the rotation error)."""
     task_err = 0.0
     for task in posture.get("tasks", []):
         if task.get("weight") is not None:
@@ -181,14 +274,7 @@ def verify_posture(
         if task.get("rotation") is not None:
             err = pin.log3(np.asarray(task["rotation"], dtype=float).T @ M.rotation)
             task_err = max(task_err, float(np.abs(err).max()))
-    checks.append(Check("tasks", task_err, TOL_TASK))
-    notes: list[str] = []
-    if posture.get("collision") is not None:
-        if geometry is None:
-            geometry = geometry_of_posture(posture, model)
-        mesh_checks, notes = mesh_collision_checks(posture, model, geometry, q)
-        checks.extend(mesh_checks)
-    return VerifyReport(tuple(checks), tuple(notes))
+    return Check("tasks", task_err, TOL_TASK)
 
 
 def _gravity(posture: dict[str, Any], model: pin.Model) -> np.ndarray | None:
@@ -316,42 +402,6 @@ def ellipse_depth(
     cross = edge[:, 0] * (point[1] - v[:, 1]) - edge[:, 1] * (point[0] - v[:, 0])
     turn = np.sign(a1[0] * a2[1] - a1[1] * a2[0])  # +1: counter-clockwise
     return float(np.min(turn * cross / np.linalg.norm(edge, axis=1)))
-
-
-def read_json(path: str | Path, missing_fix: str, invalid_fix: str) -> Any:
-    """The parsed JSON of a file, or an InputError naming the file (``missing_fix`` when it
-    does not exist, ``invalid_fix`` when it is not JSON)."""
-    path = Path(path)
-    try:
-        return json.loads(path.read_text())
-    except FileNotFoundError as exc:
-        raise InputError(str(path), "no such file", missing_fix) from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(str(path), "cannot read it", "check the path") from exc
-    except json.JSONDecodeError as exc:
-        raise InputError(str(path), f"invalid JSON at line {exc.lineno}", invalid_fix) from exc
-
-
-def load_posture(path: str | Path) -> dict[str, Any]:
-    """Read a posture file and check its schema and required fields."""
-    path = Path(path)
-    data = read_json(path, "give the path of a posture.json", "give a posture file")
-    if not isinstance(data, dict) or data.get("schema") != SCHEMA:
-        raise InputError(
-            f"{path}: schema", f'expected "{SCHEMA}"', "give a file written by posturegen solve"
-        )
-    for key in ("robot", "q", "torques", "contacts"):
-        if key not in data:
-            raise InputError(f"{path}: {key}", "missing", "give a file written by posturegen solve")
-    return data
-
-
-def model_of_posture(posture: dict[str, Any]) -> pin.Model:
-    """The Pinocchio model named by a posture's ``robot`` entry (URDF + free flyer)."""
-    urdf = Path(str(posture["robot"].get("urdf", "")))
-    if not urdf.is_file():
-        raise InputError("robot.urdf", f"no file {urdf}", "regenerate the posture on this machine")
-    return pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
 
 
 def verify_file(path: str | Path) -> VerifyReport:

@@ -3,8 +3,8 @@
     >>> results = pg.solve_many(["a.yaml", {...}, problem], workers=2)
     >>> [r.success for r in results]          # input order
 
-A problem is a :class:`~posturegen.problem.Problem`, a problem-file dict or a path; each
-answer is the frozen :class:`~posturegen.solve.Result` of ``pg.solve`` (``diagnose=True``: of
+A problem is a :class:`~posturegen.solver.problem.Problem`, a problem-file dict or a path; each
+answer is the frozen :class:`~posturegen.solver.solve.Result` of ``pg.solve`` (``diagnose=True``: of
 ``pg.diagnose``), or a :class:`BatchError` (``success`` False) when the problem could not be
 built, raised, or lost its worker: one failure never stops the batch. Each worker lives for the
 whole batch and builds each solver structure once (posturegen.batch.worker).
@@ -16,7 +16,7 @@ import warnings
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
-from ..solve import Result
+from ..solver.solve import Result
 from .backends import BACKENDS, open_backend
 from .jobs import BatchError, BatchItem, make_jobs
 from .schedule import run_jobs

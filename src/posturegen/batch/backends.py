@@ -21,7 +21,7 @@ def open_backend(
     warm: Sequence[Job] = (),
 ) -> LocalBackend | RayBackend:
     """The backend's workers, started (``warm`` jobs solved by each worker first);
-    ``diagnose``: failures are diagnosed in the workers (posturegen.diagnose)."""
+    ``diagnose``: failures are diagnosed in the workers (posturegen.solver.diagnose)."""
     if workers is not None and workers < 1:
         raise InputError("workers", f"{workers} workers", "give an integer >= 1")
     if backend == "local":

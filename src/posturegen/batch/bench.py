@@ -28,7 +28,7 @@ from pathlib import Path
 
 from ..bench import FAMILIES
 from ..errors import InputError
-from ..solve import Result
+from ..solver.solve import Result
 from .backends import open_backend
 from .jobs import BatchItem, Job, make_jobs
 from .report import percentile

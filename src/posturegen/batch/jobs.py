@@ -2,13 +2,14 @@
 answer.
 
 A Job carries the problem as its problem-file dict (cheap to send, rebuilt by the worker with
-``problem_from_dict``), or as a :class:`~posturegen.problem.Problem` pickled with its robot *by
+``problem_from_dict``), or as a :class:`~posturegen.solver.problem.Problem` pickled with its robot
+*by
 name*: the worker's ``load_bundled(name)`` gives its own cached robot, so that the structure
 keys (which hold ``id(robot.model)``) match and the worker's solvers are reused from one problem
 to the next. A Problem built on a robot loaded from a URDF cannot travel (its patch file is not
 recorded): pass its problem dict or file instead.
 
-A BatchItem carries the frozen :class:`~posturegen.solve.Result` (it pickles: about 8 kB for
+A BatchItem carries the frozen :class:`~posturegen.solver.solve.Result` (it pickles: about 8 kB for
 Talos), or a :class:`BatchError` when the problem gave no Result at all.
 """
 
@@ -25,11 +26,11 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError
-from ..geometry import ConvexPolygon
-from ..problem import Problem
-from ..robot import Robot, load_bundled
-from ..solve import Result
-from ..spec import read_yaml
+from ..io.problem_file import read_yaml
+from ..model.geometry import ConvexPolygon
+from ..model.robot import Robot, load_bundled
+from ..solver.problem import Problem
+from ..solver.solve import Result
 
 # what BatchError.status says
 INPUT_ERROR, ERROR, CRASHED = "input error", "error", "worker crashed"
@@ -125,12 +126,9 @@ class _ProblemPickler(pickle.Pickler):
 
 
 def pack_problem(problem: Problem) -> bytes:
-    """A Problem as bytes for a worker (its robot by name, without the collision rows of its
-    last solve, which solve() rebuilds)."""
+    """A Problem as bytes for a worker (its robot by name)."""
     buffer = io.BytesIO()
-    _ProblemPickler(buffer, protocol=pickle.HIGHEST_PROTOCOL).dump(
-        dataclasses.replace(problem, collision_term=None)
-    )
+    _ProblemPickler(buffer, protocol=pickle.HIGHEST_PROTOCOL).dump(problem)
     return buffer.getvalue()
 
 

@@ -1,7 +1,7 @@
 """The local backend: the standard library's process pool on this machine's cores.
 
 Workers are forked from a forkserver that has imported posturegen: each starts clean (no
-thread, lock or compiler of the calling process: see posturegen.codegen and _lifeline) with
+thread, lock or compiler of the calling process: see posturegen.solver.codegen and _lifeline) with
 ``OPENBLAS_NUM_THREADS=1`` set before OpenBLAS loaded (posturegen._threads), without importing
 Pinocchio and CasADi again. As with every multiprocessing program that does not fork, a script
 that starts a batch must guard its top level with ``if __name__ == "__main__":`` (a worker

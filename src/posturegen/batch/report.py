@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
-from ..solve import _IPOPT_OK, Result
+from ..solver.solve import _IPOPT_OK, Result
 from .jobs import BatchError, BatchItem
 
 INDEX_FILE = "batch.json"

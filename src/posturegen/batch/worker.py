@@ -1,6 +1,7 @@
 """What a worker process runs: chunks of Jobs, one problem at a time.
 
-Solver structures are cached per process (:meth:`posturegen.problem.Problem.compile`, robots by
+Solver structures are cached per process (:meth:`posturegen.solver.problem.Problem.compile`, robots
+by
 ``load_bundled``): a worker that lives across many chunks builds each structure once. Any
 exception of one problem becomes its :class:`BatchError`; the chunk goes on.
 """
@@ -18,11 +19,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .. import problem as problem_module
-from ..diagnose import diagnose as diagnose_result
 from ..errors import InputError, PosturegenError, PosturegenWarning
-from ..solve import Result, solve
-from ..spec import problem_from_dict
+from ..io.problem_file import problem_from_dict
+from ..solver import compile as compile_module
+from ..solver.diagnose import diagnose as diagnose_result
+from ..solver.solve import Result, solve
 from .jobs import ERROR, INPUT_ERROR, BatchError, BatchItem, Job, read_file
 
 
@@ -90,7 +91,7 @@ class WorkerInfo:
 
 def worker_info() -> WorkerInfo:
     """This process's WorkerInfo."""
-    return WorkerInfo(worker_name(), len(problem_module._CACHE), blas_threads())
+    return WorkerInfo(worker_name(), len(compile_module._CACHE), blas_threads())
 
 
 _GET_THREADS = ("openblas_get_num_threads", "scipy_openblas_get_num_threads64_")

@@ -9,17 +9,22 @@
   drawn over it.
 - :func:`write_html` (:mod:`.html`) writes ONE HTML file with an interactive three.js view.
 
-The modules, each importing only those before it: ``style`` (colours, constants) · ``files``
-(posture and sequence files) · ``meshes`` (the robot's decimated meshes) · ``views`` (what is
-drawn, in the world) · ``raster`` (camera, window, z-buffer) · ``scene`` (the scene's
-triangles) · ``labels`` (text that does not overlap) · ``obstacles`` (boxes at their
-depth) · ``triad`` (world axes, scale bar) · ``view3d`` · ``closeup`` · ``figure`` ·
-``html``.
+The modules, each importing only those before it: ``style`` (colours, constants) · ``meshes``
+(the robot's decimated meshes) · ``views`` (what is drawn, in the world) · ``raster`` (camera,
+window, z-buffer) · ``scene`` (the scene's triangles) · ``labels`` (text that does not overlap)
+· ``obstacles`` (boxes at their depth) · ``triad`` (world axes, scale bar) · ``view3d`` ·
+``closeup`` · ``figure`` · ``html``.
 """
 
-from ..verify import SEQUENCE_SCHEMA
+from ..io.posture_file import load_posture_any
+from ..io.sequence_file import (
+    SEQUENCE_SCHEMA,
+    is_sequence,
+    load_sequence,
+    read_json,
+    write_sequence,
+)
 from .figure import Drawing, draw_figure, render_png
-from .files import is_sequence, load_posture_any, load_sequence, read_json, write_sequence
 from .html import viewer_html, write_html
 from .meshes import MeshPart, RobotMeshes, decimate, mesh_cache_dir, robot_meshes, shape_mesh
 from .raster import Camera, Frame, rasterize

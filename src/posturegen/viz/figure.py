@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from ..io.posture_file import load_posture_any
 from .closeup import draw_closeup
-from .files import load_posture_any
 from .scene import force_scale
 from .style import (
     ELLIPSE_COLOR,

@@ -17,7 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from .files import is_sequence, load_posture_any, load_sequence, read_json
+from ..io.posture_file import load_posture_any
+from ..io.sequence_file import is_sequence, load_sequence, read_json
 from .scene import bounds, force_scale, scene_mesh
 from .style import (
     ELLIPSE_COLOR,
@@ -77,20 +78,20 @@ def _script_json(value: Any) -> str:
     return json.dumps(value, separators=(",", ":")).replace("<", "\\u003c")
 
 
+def _mesh_json(part: Any) -> dict[str, Any]:
+    """A mesh part as the viewer reads it: base64 little-endian vertices and triangles."""
+    wide = len(part.vertices) > 65535
+    return {
+        "name": part.name,
+        "v": _b64(part.vertices.astype("<f4")),
+        "i": _b64(part.triangles.astype("<u4" if wide else "<u2")),
+        "wide": wide,
+    }
+
+
 def viewer_html(views: Sequence[StanceView], files: Sequence[str], title: str) -> str:
     """The viewer's HTML text for stances of one robot (their meshes are the first one's)."""
-    meshes = views[0].meshes
-    mesh_json = []
-    for p in meshes.parts:
-        wide = len(p.vertices) > 65535
-        mesh_json.append(
-            {
-                "name": p.name,
-                "v": _b64(p.vertices.astype("<f4")),
-                "i": _b64(p.triangles.astype("<u4" if wide else "<u2")),
-                "wide": wide,
-            }
-        )
+    mesh_json = [_mesh_json(p) for p in views[0].meshes.parts]
     scenes: list[dict[str, Any]] = []
     stages = []
     scale = force_scale(views)

@@ -4,7 +4,6 @@ on disk ($POSTUREGEN_CACHE/meshes)."""
 
 from __future__ import annotations
 
-import functools
 import json
 import os
 from dataclasses import dataclass
@@ -14,6 +13,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from .._cache import memoize
 from ..errors import InputError
 from .style import MESH_KINDS, PNG_CELL
 
@@ -174,7 +174,7 @@ def _save_parts(file: Path, parts: list[MeshPart], skipped: list[str]) -> None:
         pass
 
 
-@functools.lru_cache(maxsize=4)
+@memoize("robot meshes", 4)
 def _robot_meshes(urdf: str, package_dirs: tuple[str, ...], kind: str, cell: float) -> RobotMeshes:
     model = pin.buildModelFromUrdf(urdf, pin.JointModelFreeFlyer())
     file = _cache_file(urdf, package_dirs, kind, cell)

@@ -1,0 +1,327 @@
+"""A robot's sphere proxies (:mod:`posturegen.collision.proxy_fit`), cached, and its candidate
+self-collision pairs: every pair of spheres of two joints that the pair rule
+(:mod:`posturegen.collision.pairs`) leaves checked.
+
+Each pair of joints has a *clearance* [m]: how far apart its proxies are at the reference
+posture. A pair whose proxies are closer there than the collision margin is held at least
+that far apart instead of the margin (the reference itself stays feasible); one whose
+proxies overlap there (their meshes do not: else they would be unchecked) is held no deeper
+than there minus SLIDE, and the mesh check decides.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from ..model.robot import Robot
+from . import pairs, proxy_fit, surface
+from .pairs import PairRule, joint_pair, pair_rule
+from .proxy_fit import PROXY_VERSION, Sphere, fit_robot
+
+
+def cache_dir() -> Path:
+    """Where fitted proxies are cached: $POSTUREGEN_CACHE, else ~/.cache/posturegen."""
+    root = os.environ.get("POSTUREGEN_CACHE") or Path.home() / ".cache" / "posturegen"
+    return Path(root) / "proxies"
+
+
+# [m] how much deeper than at the reference posture a pair whose proxies overlap there (its
+# meshes do not) may go: turning the joint between them slides the spheres of one face along
+# those of the other, whose bulges come and go by up to the excess; held at the reference
+# itself, HRP-2's hips (meshes 1.3 mm apart, proxies -15.6 mm) kept its stand-reach from
+# bending (IPOPT infeasible at every margin; verified with 1 or 2 cm)
+SLIDE = 0.01
+GROUP = 16  # spheres per group of the broad phase (a joint's spheres split by their extent)
+
+
+@dataclass(frozen=True)
+class Close:
+    """Candidate sphere pairs found close: sphere indices i (of the joint pair's first joint)
+    and j, their joint pair (index into ProxyModel.joint_pairs) and distance [m], each (k,)."""
+
+    i: np.ndarray
+    j: np.ndarray
+    link: np.ndarray
+    d: np.ndarray
+
+    def take(self, index: np.ndarray) -> Close:
+        """The pairs at ``index`` (a mask or indices)."""
+        return Close(self.i[index], self.j[index], self.link[index], self.d[index])
+
+    def tuples(self) -> set[tuple[int, int]]:
+        """{(min(i, j), max(i, j))}: the pairs as the program holds them."""
+        lo, hi = np.minimum(self.i, self.j), np.maximum(self.i, self.j)
+        return {(int(a), int(b)) for a, b in zip(lo, hi, strict=True)}
+
+
+@dataclass
+class ProxyModel:
+    """Sphere proxies of a robot (sorted by joint, then by group of the broad phase) and its
+    candidate self-collision pairs: every pair of spheres of the candidate joint pairs, never
+    listed (Talos: 3 million), found by a broad phase on joints, then groups of GROUP spheres."""
+
+    spheres: list[Sphere]
+    joint_pairs: np.ndarray  # (P, 2) candidate joint pairs (sorted ids)
+    clearance: np.ndarray  # (P,) [m] their proxies' distance at the reference posture
+    rule: PairRule
+    # (njoints,) limb of each joint (see limbs()); None: every joint its own limb
+    limb: np.ndarray | None = None
+    report: dict[str, Any] = field(default_factory=dict)  # the fit's refinement report
+
+    def __post_init__(self) -> None:
+        groups = _grouped(self.spheres)  # spheres reordered: joints and groups contiguous
+        self.spheres = [self.spheres[k] for g in groups for k in g]
+        self._joint = np.array([s.joint_id for s in self.spheres], dtype=int)  # (S,)
+        self._local = np.array([s.center for s in self.spheres]).reshape(-1, 3)  # (S, 3)
+        self._radii = np.array([s.radius for s in self.spheres])  # (S,)
+        self._joints = np.unique(self._joint)  # the joints that carry spheres
+        self._joint_list = [int(j) for j in self._joints]
+        self._joint_start = np.searchsorted(self._joint, np.arange(self._joint.max(initial=0) + 2))
+        sizes = np.array([len(g) for g in groups], dtype=int)
+        self._group_start = np.concatenate([[0], np.cumsum(sizes)])  # (G + 1,)
+        self._group_joint = self._joint[self._group_start[:-1]]  # (G,)
+        self._members = np.full((len(groups), GROUP), -1, dtype=int)  # (G, GROUP)
+        for g, (start, size) in enumerate(zip(self._group_start[:-1], sizes, strict=True)):
+            self._members[g, :size] = np.arange(start, start + size)
+        # each joint pair's group pairs, contiguous: (ga, gb) for ga of a, gb of b
+        ga, gb, link = [], [], []
+        for k, (a, b) in enumerate(self.joint_pairs):
+            A, B = np.flatnonzero(self._group_joint == a), np.flatnonzero(self._group_joint == b)
+            ga.append(np.repeat(A, len(B)))
+            gb.append(np.tile(B, len(A)))
+            link.append(np.full(len(A) * len(B), k))
+        self._ga = np.concatenate(ga) if ga else np.zeros(0, dtype=int)
+        self._gb = np.concatenate(gb) if gb else np.zeros(0, dtype=int)
+        self._gp_link = np.concatenate(link) if link else np.zeros(0, dtype=int)
+        self._gp_start = np.searchsorted(self._gp_link, np.arange(len(self.joint_pairs) + 1))
+        self._index = {(int(a), int(b)): k for k, (a, b) in enumerate(self.joint_pairs)}
+
+    def pair_clearance(self, margin: float) -> np.ndarray:
+        """(P,) [m] how far apart each candidate joint pair is held: min(margin, clearance),
+        or, for a pair whose proxies overlap at the reference, clearance - SLIDE."""
+        return np.where(
+            self.clearance < 0, self.clearance - SLIDE, np.minimum(margin, self.clearance)
+        )
+
+    def link_index(self, a: int, b: int) -> int:
+        """The index of joint pair (a, b) (either order) in ``joint_pairs``."""
+        return self._index[joint_pair(a, b)]
+
+    def centers_world(self, model: pin.Model, data: pin.Data) -> np.ndarray:
+        """(S, 3) sphere centres in world for the placements already in ``data.oMi``:
+        c_world = R_j·c + p_j of each sphere's joint j."""
+        T = np.zeros((model.njoints, 4, 4))
+        oMi = data.oMi
+        T[self._joints] = [oMi[j].homogeneous for j in self._joint_list]
+        T = T[self._joint]  # (S, 4, 4)
+        return np.einsum("sij,sj->si", T[:, :3, :3], self._local) + T[:, :3, 3]
+
+    def close_pairs(
+        self, centers: np.ndarray, slack: np.ndarray, links: np.ndarray | None = None
+    ) -> Close:
+        """The candidate sphere pairs closer than their joint pair's ``slack`` (P,) [m],
+        among the joint pairs ``links`` (indices, default all), for sphere centres (S, 3) in
+        world. Joint pairs, then pairs of groups, whose bounding spheres are farther apart
+        than the slack (a lower bound of every distance between their spheres) are skipped."""
+        k = np.arange(len(self.joint_pairs)) if links is None else np.asarray(links, dtype=int)
+        jc, jr = _bounds(centers, self._radii, self._joint_start, self._joints)
+        a, b = self.joint_pairs[k, 0], self.joint_pairs[k, 1]
+        gap = np.linalg.norm(jc[a] - jc[b], axis=1) - jr[a] - jr[b]
+        k = k[gap < slack[k]]  # the joint pairs that pass
+        first, count = self._gp_start[k], self._gp_start[k + 1] - self._gp_start[k]
+        gp = np.arange(count.sum()) + np.repeat(first - (np.cumsum(count) - count), count)
+        gc, gr = _bounds(centers, self._radii, self._group_start, np.arange(len(self._members)))
+        ga, gb, link = self._ga[gp], self._gb[gp], self._gp_link[gp]
+        gap = np.linalg.norm(gc[ga] - gc[gb], axis=1) - gr[ga] - gr[gb]
+        ok = gap < slack[link]  # the group pairs that pass
+        ga, gb, link = ga[ok], gb[ok], link[ok]
+        i = np.repeat(self._members[ga], GROUP, axis=1).ravel()  # (n·GROUP²,)
+        j = np.tile(self._members[gb], GROUP).ravel()
+        link = np.repeat(link, GROUP * GROUP)
+        valid = (i >= 0) & (j >= 0)
+        i, j, link = i[valid], j[valid], link[valid]
+        d = self.distances(centers, i, j)
+        keep = d < slack[link]
+        return Close(i[keep], j[keep], link[keep], d[keep])
+
+    def distances(self, centers: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        """Distances |c_i - c_j| - r_i - r_j [m] of sphere pairs (indices i, j)."""
+        u = centers[i] - centers[j]
+        return np.sqrt(np.einsum("ij,ij->i", u, u)) - self._radii[i] - self._radii[j]
+
+    def links_of(self, excluded: set[tuple[int, int]] | frozenset[tuple[int, int]]) -> np.ndarray:
+        """Indices of the candidate joint pairs that are not ``excluded`` (sorted ids)."""
+        return np.array(
+            [i for i, (a, b) in enumerate(self.joint_pairs) if (int(a), int(b)) not in excluded],
+            dtype=int,
+        )
+
+    @property
+    def radii(self) -> np.ndarray:
+        """(S,) radii [m]."""
+        return self._radii
+
+    @property
+    def joint_ids(self) -> np.ndarray:
+        """(S,) each sphere's joint."""
+        return self._joint
+
+
+def closest(close: Close, per_link: int) -> Close:
+    """The ``per_link`` closest pairs of each joint pair among ``close``."""
+    order = np.lexsort((close.d, close.link))
+    link = close.link[order]
+    first = np.searchsorted(link, link)  # where each one's joint pair starts
+    return close.take(order[np.arange(len(link)) - first < per_link])
+
+
+def _bounds(
+    centers: np.ndarray, radii: np.ndarray, start: np.ndarray, which: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """World centres and radii of spheres bounding the runs start[w]:start[w + 1] of the
+    spheres, for w in ``which`` (indexed by w; other rows unused): the mean of their centres
+    and the farthest sphere from it."""
+    n = len(start) - 1
+    mean = np.zeros((n, 3))
+    radius = np.zeros(n)
+    which = np.asarray(which, dtype=int)
+    which = which[start[which + 1] > start[which]]
+    sums = np.add.reduceat(centers, start[which], axis=0)
+    mean[which] = sums / (start[which + 1] - start[which])[:, None]
+    owner = np.repeat(which, start[which + 1] - start[which])
+    rows = np.concatenate([np.arange(start[w], start[w + 1]) for w in which])
+    np.maximum.at(radius, owner, np.linalg.norm(centers[rows] - mean[owner], axis=1) + radii[rows])
+    return mean, radius
+
+
+def _grouped(spheres: list[Sphere]) -> list[list[int]]:
+    """Groups of at most GROUP sphere indices, each of one joint, by joint: a joint's
+    spheres split at the median of their centres along their widest extent until small."""
+    out: list[list[int]] = []
+    by_joint: dict[int, list[int]] = {}
+    for k, s in enumerate(spheres):
+        by_joint.setdefault(s.joint_id, []).append(k)
+    for j in sorted(by_joint):
+        todo = [np.array(by_joint[j])]
+        while todo:
+            idx = todo.pop()
+            if len(idx) <= GROUP:
+                out.append([int(k) for k in idx])
+                continue
+            c = np.array([spheres[k].center for k in idx])
+            axis = int(np.argmax(np.ptp(c, axis=0)))
+            order = idx[np.argsort(c[:, axis], kind="stable")]
+            todo += [order[len(order) // 2 :], order[: len(order) // 2]]
+    return out
+
+
+def _cache_key(robot: Robot) -> str:
+    """A digest of what the fit depends on: the fitting code itself (its modules' sources:
+    any change of a constant or a step fits anew), the URDF and the SRDF."""
+    h = hashlib.sha1(f"v{PROXY_VERSION}".encode())
+    for module in (proxy_fit, surface, pairs):
+        h.update(Path(str(module.__file__)).read_bytes())
+    for path in (robot.urdf, robot.srdf):
+        if path is not None:
+            h.update(Path(path).read_bytes())
+    return h.hexdigest()[:16]
+
+
+def robot_spheres(robot: Robot, rule: PairRule) -> tuple[list[Sphere], dict[str, Any]]:
+    """The robot's proxies (:func:`posturegen.collision.proxy_fit.fit_robot`), fitted once and
+    cached
+    on disk (:func:`cache_dir`); and the fit's report."""
+    path = cache_dir() / f"{_cache_key(robot)}.json"
+    if path.is_file():
+        try:
+            raw = json.loads(path.read_text())
+            spheres = [
+                Sphere(
+                    int(s["joint"]), np.array(s["center"]), float(s["radius"]), float(s["excess"])
+                )
+                for s in raw["spheres"]
+            ]
+            return spheres, dict(raw.get("report", {}))
+        except (OSError, ValueError, KeyError, TypeError):
+            pass  # a broken cache file: fit again
+    spheres, report = fit_robot(robot.model, robot.collision_model(), rule)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(
+            json.dumps(
+                {
+                    "version": PROXY_VERSION,
+                    "spheres": [
+                        {
+                            "joint": s.joint_id,
+                            "center": s.center.tolist(),
+                            "radius": s.radius,
+                            "excess": s.excess,
+                        }
+                        for s in spheres
+                    ],
+                    "report": report,
+                }
+            )
+        )
+    except OSError:
+        pass  # a read-only home: fit again next time
+    return spheres, report
+
+
+def proxy_model(robot: Robot) -> ProxyModel:
+    """The robot's proxies and candidate pairs (fitted once, cached on disk and in memory)."""
+    cached = robot._proxy_model
+    if cached is not None:
+        return cached
+    model = robot.model
+    rule = pair_rule(model, robot.collision_model(), str(robot.srdf) if robot.srdf else None)
+    spheres, report = robot_spheres(robot, rule)
+    joints = sorted({s.joint_id for s in spheres})
+    pairs = [
+        (a, b) for i, a in enumerate(joints) for b in joints[i + 1 :] if rule.reason(a, b) is None
+    ]
+    joint_pairs = np.array(pairs, dtype=int).reshape(-1, 2)
+    clearance = reference_clearance(model, spheres, joint_pairs, rule.reference_q)
+    pm = ProxyModel(spheres, joint_pairs, clearance, rule, limbs(model), report)
+    robot._proxy_model = pm
+    return pm
+
+
+def reference_clearance(
+    model: pin.Model, spheres: list[Sphere], joint_pairs: np.ndarray, q: np.ndarray
+) -> np.ndarray:
+    """(P,) [m] the smallest distance between the proxies of each joint pair at posture q."""
+    data = model.createData()
+    pin.forwardKinematics(model, data, q)
+    of: dict[int, list[Sphere]] = {}
+    for s in spheres:
+        of.setdefault(s.joint_id, []).append(s)
+    world = {
+        j: (np.array([data.oMi[j].act(s.center) for s in sp]), np.array([s.radius for s in sp]))
+        for j, sp in of.items()
+    }
+    out = np.empty(len(joint_pairs))
+    for k, (a, b) in enumerate(joint_pairs):
+        (ca, ra), (cb, rb) = world[int(a)], world[int(b)]
+        out[k] = (np.linalg.norm(ca[:, None] - cb[None], axis=2) - ra[:, None] - rb).min()
+    return out
+
+
+def limbs(model: pin.Model) -> np.ndarray:
+    """(njoints,) the limb of each joint: the first joint of its chain below the nearest
+    branching of the kinematic tree (Talos: the pelvis, torso, head, each arm and each leg)."""
+    children = np.bincount(np.asarray(model.parents[1:], dtype=int), minlength=model.njoints)
+    out = np.arange(model.njoints)
+    for j in range(2, model.njoints):
+        parent = int(model.parents[j])
+        out[j] = out[parent] if children[parent] < 2 and parent > 0 else j
+    return out

@@ -1,0 +1,435 @@
+"""Problem files (YAML, see README "Problem file") -> :class:`~posturegen.solver.problem.Problem`.
+
+Every mistake raises one :class:`~posturegen.errors.InputError` naming the field and the fix.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from .. import _fields as F
+from .._fields import read_yaml  # the problem file's reader (public here)
+from ..collision.boxes import MARGIN, CollisionOptions, excluded_joint_ids
+from ..errors import InputError
+from ..hints import with_hint
+from ..model.robot import Robot, load_robot
+from ..model.scene import Scene
+from ..plausible import check_angles, check_target
+from ..solver.problem import Problem, SolverOptions, Term
+from ..terms.contacts import (
+    Contact,
+    FixedContact,
+    GeometricContact,
+    InclusiveContact,
+    PointContact,
+    SupportContact,
+)
+from ..terms.cop import DEFAULT_COP_MARGIN
+from ..terms.costs import ForceCost, PostureCost, TorqueCost
+from ..terms.ellipse_options import EllipseOptions
+from ..terms.friction import FRICTION_KINDS, FrictionModel
+from ..terms.tasks import PositionTask
+from .placement import place_on_fixed_contacts
+
+CONTACT_TYPES = ("fixed", "geometric", "support", "inclusive", "point")
+_TOP_REQUIRED = ("robot", "contacts")
+_TOP_OPTIONAL = (
+    "mu",
+    "surfaces",
+    "obstacles",
+    "tasks",
+    "options",
+    "costs",
+    "friction",
+    "name",
+    "description",
+)
+
+
+def load_problem(path: str | Path) -> Problem:
+    """Read and validate a problem file."""
+    path = Path(path)
+    return problem_from_dict(read_yaml(path), base_dir=path.parent)
+
+
+def _friction(value: Any, field: str) -> FrictionModel:
+    if value is None:
+        return FrictionModel()
+    if value == "cone":
+        return FrictionModel("cone")
+    v = F.require_mapping(value, field)
+    F.check_keys(v, field, ["model"], ["faces"])
+    kind = F.string(v["model"], f"{field}.model")
+    if kind not in FRICTION_KINDS:
+        raise InputError(
+            f"{field}.model",
+            f"unknown friction model '{kind}'",
+            with_hint(kind, ("pyramid", "cone"), "use pyramid or cone"),
+        )
+    faces = v.get("faces", 4)
+    if isinstance(faces, bool) or not isinstance(faces, int) or faces < 3:
+        raise InputError(f"{field}.faces", f"expected an integer >= 3, got {faces!r}", "use 4 or 8")
+    return FrictionModel(kind, faces)
+
+
+_ELLIPSE_KEYS = ["formulation", "min_radii", "min_area", "maximize_area", "scaling"]
+_CONTACT_KEYS = {
+    "fixed": ["position", "yaw", "mu", "friction", "cop_margin"],
+    "geometric": [*_ELLIPSE_KEYS, "yaw_range"],
+    "support": [*_ELLIPSE_KEYS, "points", "mu", "friction", "yaw_range", "cop_margin"],
+    "inclusive": ["yaw_range"],
+    "point": ["point", "yaw_range"],
+}
+
+
+_ANY_CONTACT_KEY = sorted({k for keys in _CONTACT_KEYS.values() for k in keys})
+
+
+def _yaw_range(c: dict[str, Any], fld: str) -> tuple[float, float] | None:
+    """A floating contact's optional yaw bounds [ψ_min, ψ_max] (rad), less than a turn apart."""
+    if c.get("yaw_range") is None:
+        return None
+    bounds = F.vector(c["yaw_range"], 2, f"{fld}.yaw_range")
+    lo, hi = (float(v) for v in bounds)
+    if not lo < hi < lo + 2 * np.pi:
+        raise InputError(
+            f"{fld}.yaw_range",
+            f"[{lo:g}, {hi:g}] is not an interval shorter than a turn",
+            "write [min, max] in rad with min < max < min + 2π (omit it for any yaw)",
+        )
+    check_angles(bounds, f"{fld}.yaw_range")
+    return lo, hi
+
+
+def _ellipse_options(c: Any, fld: str) -> EllipseOptions:
+    base = EllipseOptions()
+    form = F.string(c.get("formulation", base.formulation), f"{fld}.formulation")
+    if form not in ("paper", "support"):
+        raise InputError(
+            f"{fld}.formulation",
+            f"unknown formulation '{form}'",
+            with_hint(form, ("paper", "support"), "use paper or support"),
+        )
+    radii = base.min_radii
+    if "min_radii" in c:
+        r = F.vector(c["min_radii"], 2, f"{fld}.min_radii")
+        if np.any(r <= 0):
+            raise InputError(f"{fld}.min_radii", "radii must be positive", "write [rx, ry] > 0 (m)")
+        radii = (float(r[0]), float(r[1]))
+    scaling = c.get("scaling", base.scaling)
+    if scaling not in ("auto", "none"):
+        scaling = F.number(scaling, f"{fld}.scaling", positive=True)
+    return EllipseOptions(
+        formulation=form,
+        min_radii=radii,
+        min_area=F.number(c.get("min_area", 0.0), f"{fld}.min_area", minimum=0.0),
+        maximize_area=F.number(c.get("maximize_area", 0.0), f"{fld}.maximize_area", minimum=0.0),
+        scaling=scaling,
+    )
+
+
+def _contact(
+    c: Any,
+    i: int,
+    robot: Robot,
+    scene: Scene,
+    mu: float,
+    friction: FrictionModel,
+    names: set[str],
+    cop_margin: float = DEFAULT_COP_MARGIN,
+) -> Contact:
+    fld = f"contacts[{i}]"
+    c = F.require_mapping(c, fld)
+    # required first, and misspelt keys of any contact type
+    F.check_keys(c, fld, ["robot_patch", "surface", "type"], ["name", *_ANY_CONTACT_KEY])
+    ctype = F.string(c["type"], f"{fld}.type")
+    if ctype not in CONTACT_TYPES:
+        raise InputError(
+            f"{fld}.type",
+            f"unknown contact type '{ctype}'",
+            with_hint(ctype, CONTACT_TYPES, f"use one of: {', '.join(CONTACT_TYPES)}"),
+        )
+    F.check_keys(c, fld, ["robot_patch", "surface", "type"], ["name", *_CONTACT_KEYS[ctype]])
+    patch = robot.patch(F.string(c["robot_patch"], f"{fld}.robot_patch"), f"{fld}.robot_patch")
+    surface = scene.surface(F.string(c["surface"], f"{fld}.surface"), f"{fld}.surface")
+    name = F.string(c.get("name", patch.name), f"{fld}.name")
+    if name in names:
+        raise InputError(
+            f"{fld}.name", f"two contacts are named '{name}'", "give each contact a unique name"
+        )
+    names.add(name)
+    mu_c = F.number(c.get("mu", mu), f"{fld}.mu", minimum=0.0)
+    fric = _friction(c["friction"], f"{fld}.friction") if "friction" in c else friction
+    yr = _yaw_range(c, fld)
+    cop = F.number(c.get("cop_margin", cop_margin), f"{fld}.cop_margin", minimum=0.0)
+    common = _Common(name, patch, surface, mu_c, fric, yr, cop)
+    return _BUILDERS[ctype](c, fld, common)
+
+
+@dataclass(frozen=True)
+class _Common:
+    """What every contact type reads from its entry (validated)."""
+
+    name: str
+    patch: Any
+    surface: Any
+    mu: float
+    friction: FrictionModel
+    yaw_range: tuple[float, float] | None
+    cop_margin: float
+
+
+def _geometric(c: Any, fld: str, k: _Common) -> Contact:
+    ell = _ellipse_options(c, fld)
+    return GeometricContact(k.name, k.patch, k.surface, k.mu, ell, yaw_range=k.yaw_range)
+
+
+def _support(c: Any, fld: str, k: _Common) -> Contact:
+    n = c.get("points", 8)
+    if isinstance(n, bool) or not isinstance(n, int) or n < 4:
+        raise InputError(f"{fld}.points", f"expected an integer >= 4, got {n!r}", "use 8")
+    ell = _ellipse_options(c, fld)
+    return SupportContact(
+        k.name,
+        k.patch,
+        k.surface,
+        k.mu,
+        ell,
+        n,
+        k.friction,
+        yaw_range=k.yaw_range,
+        cop_margin=k.cop_margin,
+    )
+
+
+def _inclusive(c: Any, fld: str, k: _Common) -> Contact:
+    return InclusiveContact(k.name, k.patch, k.surface, k.mu, yaw_range=k.yaw_range)
+
+
+def _point(c: Any, fld: str, k: _Common) -> Contact:
+    point = F.vector(c.get("point", [0.0, 0.0]), 2, f"{fld}.point")
+    if not k.patch.polygon.contains(point[None])[0]:
+        raise InputError(
+            f"{fld}.point",
+            "the point is outside the robot patch",
+            "give a point of the patch polygon, in the patch frame",
+        )
+    return PointContact(k.name, k.patch, k.surface, k.mu, point, yaw_range=k.yaw_range)
+
+
+def _fixed(c: Any, fld: str, k: _Common) -> Contact:
+    if "position" not in c:
+        raise InputError(
+            f"{fld}.position",
+            "missing for a fixed contact",
+            "add position: [x, y] in the surface frame",
+        )
+    pos = F.vector(c["position"], 2, f"{fld}.position")
+    yaw = F.angle(c.get("yaw", 0.0), f"{fld}.yaw")
+    try:
+        return FixedContact(
+            k.name, k.patch, k.surface, pos, yaw, k.mu, k.friction, cop_margin=k.cop_margin
+        )
+    except InputError as exc:
+        raise InputError(
+            f"{fld}.cop_margin" if exc.field == "cop_margin" else fld, exc.problem, exc.fix
+        ) from exc
+
+
+# per contact type: its contact from the entry (CONTACT_TYPES order)
+_BUILDERS = {
+    "fixed": _fixed,
+    "geometric": _geometric,
+    "support": _support,
+    "inclusive": _inclusive,
+    "point": _point,
+}
+
+
+def _task(t: Any, i: int, robot: Robot) -> PositionTask:
+    fld = f"tasks[{i}]"
+    t = F.require_mapping(t, fld)
+    F.check_keys(t, fld, ["type", "frame", "target"], ["rpy", "weight"])
+    if t["type"] != "position":
+        raise InputError(
+            f"{fld}.type",
+            f"unknown task type {t['type']!r}",
+            with_hint(str(t["type"]), ["position"], "use position"),
+        )
+    frame = F.string(t["frame"], f"{fld}.frame")
+    fid = robot.frame_id(frame, f"{fld}.frame")
+    target = F.vector(t["target"], 3, f"{fld}.target")
+    R = None
+    if t.get("rpy") is not None:
+        rpy = F.vector(t["rpy"], 3, f"{fld}.rpy")
+        check_angles(rpy, f"{fld}.rpy")
+        R = pin.rpy.rpyToMatrix(*rpy)
+    weight = (
+        F.number(t["weight"], f"{fld}.weight", positive=True)
+        if t.get("weight") is not None
+        else None
+    )
+    return PositionTask(frame, fid, target, R, weight, index=i)
+
+
+def _costs(value: Any) -> list[Term]:
+    v = F.require_mapping(value if value is not None else {}, "costs")
+    F.check_keys(v, "costs", [], ["posture", "posture_reference", "forces", "torques"])
+    ref = v.get("posture_reference", "initial")
+    if ref not in ("initial", "default"):
+        raise InputError(
+            "costs.posture_reference", f"unknown reference {ref!r}", "use initial or default"
+        )
+    out: list[Term] = [
+        PostureCost(F.number(v.get("posture", 1.0), "costs.posture", minimum=0.0), ref)
+    ]
+    out.append(ForceCost(F.number(v.get("forces", 1e-2), "costs.forces", minimum=0.0)))
+    if v.get("torques"):
+        out.append(TorqueCost(F.number(v["torques"], "costs.torques", minimum=0.0)))
+    return out
+
+
+def _solver_options(value: Any) -> SolverOptions:
+    v = F.require_mapping(value, "options.solver")
+    F.check_keys(v, "options.solver", [], ["tol", "max_iter", "max_cpu_time", "print_level", "jit"])
+    jit = v.get("jit", False)
+    if not isinstance(jit, bool):
+        raise InputError("options.solver.jit", f"expected true or false, got {jit!r}", "write true")
+    base = SolverOptions()
+    max_iter = v.get("max_iter", base.max_iter)
+    if isinstance(max_iter, bool) or not isinstance(max_iter, int) or max_iter < 1:
+        raise InputError(
+            "options.solver.max_iter",
+            f"expected a positive integer, got {max_iter!r}",
+            "write e.g. 200",
+        )
+    return SolverOptions(
+        tol=F.number(v.get("tol", base.tol), "options.solver.tol", positive=True),
+        max_iter=max_iter,
+        max_cpu_time=F.number(
+            v.get("max_cpu_time", base.max_cpu_time), "options.solver.max_cpu_time", positive=True
+        ),
+        jit=jit,
+        print_level=int(
+            F.number(
+                v.get("print_level", base.print_level), "options.solver.print_level", minimum=0
+            )
+        ),
+    )
+
+
+def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
+    """Validate a problem-file dict and build the :class:`Problem`."""
+    data = F.require_mapping(data, "problem")
+    F.check_keys(data, "problem", _TOP_REQUIRED, _TOP_OPTIONAL)
+    robot = load_robot(data["robot"], base_dir)
+    mu = F.number(data.get("mu", 0.7), "mu", minimum=0.0)
+    friction = _friction(data.get("friction"), "friction")
+    scene = Scene.from_dict(data.get("surfaces", []), data.get("obstacles", []))
+    contacts_raw = data["contacts"]
+    if not isinstance(contacts_raw, list) or not contacts_raw:
+        raise InputError("contacts", "expected a non-empty list", "add at least one contact")
+    names: set[str] = set()
+    cop = _cop_margin(data.get("options"))
+    contacts = [
+        _contact(c, i, robot, scene, mu, friction, names, cop) for i, c in enumerate(contacts_raw)
+    ]
+    tasks_raw = data.get("tasks", []) or []
+    if not isinstance(tasks_raw, list):
+        raise InputError("tasks", "expected a list", "write tasks: [{type: position, ...}]")
+    tasks: list[Term] = [_task(t, i, robot) for i, t in enumerate(tasks_raw)]
+    for i, t in enumerate(tasks):
+        check_target(robot, t, contacts, f"tasks[{i}].target")  # a warning at most
+    options = F.require_mapping(data.get("options", {}) or {}, "options")
+    F.check_keys(
+        options,
+        "options",
+        [],
+        [
+            "initial",
+            "self_collision",
+            "solver",
+            "torque_limit_scale",
+            "environment_collision",
+            "collision_margin",
+            "collision_exclude",
+            "cop_margin",
+        ],
+    )
+    torque_scale = F.number(
+        options.get("torque_limit_scale", 1.0), "options.torque_limit_scale", positive=True
+    )
+    q_init = robot.initial_configuration(options.get("initial"), "options.initial")
+    if not _gives_base(options.get("initial")):  # a name, joints or nothing: place the base
+        q_init = place_on_fixed_contacts(robot, q_init, contacts)
+    self_collision = _flag(options.get("self_collision", False), "options.self_collision")
+    collision = _collision_options(options, robot, scene, self_collision)
+    solver = _solver_options(options.get("solver", {}) or {})
+    return Problem(
+        robot,
+        scene,
+        contacts,
+        tasks,
+        _costs(data.get("costs")),
+        np.asarray(q_init),
+        self_collision,
+        torque_scale,
+        solver,
+        collision,
+        cop_margin=cop,
+    )
+
+
+def _collision_options(
+    options: Any, robot: Robot, scene: Scene, self_collision: bool
+) -> CollisionOptions | None:
+    """What to avoid (None: nothing), from the problem's options."""
+    env = options.get("environment_collision", "auto")
+    if env != "auto":
+        env = _flag(env, "options.environment_collision")
+    avoid_env = bool(scene.obstacles) if env == "auto" else env
+    margin = F.number(
+        options.get("collision_margin", MARGIN), "options.collision_margin", minimum=0.0
+    )
+    exclude = options.get("collision_exclude", []) or []
+    if not isinstance(exclude, list) or not all(
+        isinstance(p, list) and len(p) == 2 and all(isinstance(n, str) for n in p) for p in exclude
+    ):
+        raise InputError(
+            "options.collision_exclude",
+            "expected a list of [link, link] pairs",
+            "write [[link_a, link_b], ...]",
+        )
+    if not (self_collision or avoid_env):
+        return None
+    collision = CollisionOptions(
+        self_collision, margin, tuple(tuple(p) for p in exclude), environment=avoid_env
+    )
+    excluded_joint_ids(robot, collision)  # names are checked here
+    return collision
+
+
+def _cop_margin(options: Any) -> float:
+    """``options.cop_margin`` [m], the default of every force-bearing contact."""
+    value = options.get("cop_margin") if isinstance(options, Mapping) else None
+    if value is None:
+        return DEFAULT_COP_MARGIN
+    return F.number(value, "options.cop_margin", minimum=0.0)
+
+
+def _gives_base(initial: Any) -> bool:
+    """Whether ``options.initial`` gives the base placement (the nq numbers of q), rather than
+    a reference posture's name, a joint mapping or nothing (the robot's default)."""
+    return initial is not None and not isinstance(initial, str | Mapping)
+
+
+def _flag(value: Any, field: str) -> bool:
+    if not isinstance(value, bool):
+        raise InputError(field, f"expected true or false, got {value!r}", "write true or false")
+    return value

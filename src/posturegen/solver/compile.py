@@ -1,0 +1,337 @@
+"""Compiling a program: the symbolic program of a problem *structure* (declared once by its
+terms), its IPOPT solver and the layout of its x, p and g vectors, each cached by structure.
+
+A second problem of the same shape (other targets, other contact poses) pays no set-up: the
+numeric parameter values, initial guess and bounds of an instance are filled by
+:func:`numeric`. The caches key on :meth:`Compilable.key`, which holds the robot's model
+(:class:`posturegen._cache.Ref`), so that an entry never outlives what it was built for."""
+
+from __future__ import annotations
+
+import hashlib
+import threading
+import time
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, Protocol
+
+import casadi as ca
+import numpy as np
+
+from .._cache import BoundedCache, memoize
+from ..errors import SolveError
+from ..model.robot import Robot
+from ..terms.elastic import Elastic, soften
+from ..terms.nlp import NLP, BlockDerivatives, BuildContext, Term, check_derivatives
+from . import codegen
+
+
+class Compilable(Protocol):
+    """What is compiled: a problem with a solve's overrides
+    (:class:`posturegen.solver.problem.Program`)."""
+
+    @property
+    def robot(self) -> Robot: ...
+    @property
+    def solver_options(self) -> Any: ...
+    @property
+    def elastic(self) -> Elastic | None: ...
+    def key(self) -> tuple[Any, ...]: ...
+    def terms(self) -> list[Term]: ...
+
+
+@dataclass
+class _Layout:
+    """Where each named block sits in x, p and g, the cost terms' names, and the bounds."""
+
+    x_index: dict[str, slice]
+    p_index: dict[str, slice]
+    g_index: dict[str, slice]
+    cost_names: list[str]
+    lbx: np.ndarray
+    ubx: np.ndarray
+    lbg: np.ndarray
+    ubg: np.ndarray
+
+    @property
+    def n_x(self) -> int:
+        """Number of variables."""
+        return self.lbx.size
+
+    @property
+    def n_g(self) -> int:
+        """Number of constraint rows."""
+        return self.lbg.size
+
+
+@dataclass
+class CompiledNLP(_Layout):
+    """A built solver with the layout of its x, p and g vectors.
+
+    ``solver`` runs CasADi's virtual machine until the structure's generated C is available
+    (``library``: then it runs the compiled library of ``library_key``, see
+    :mod:`posturegen.solver.codegen`); :meth:`refresh` switches when the library appears."""
+
+    key: tuple[Any, ...]
+    solver: ca.Function
+    nlp: ca.Function  # (x, p) -> (f, g): the program itself, for inspection and tests
+    outputs: ca.Function  # (x, p) -> outputs
+    build_time_s: float
+    ipopt_options: dict[str, Any] = field(default_factory=dict)
+    codegen_mode: str = "off"
+    library_key: str | None = None  # content hash of the program (None: codegen off)
+    library: bool = False  # solver runs the compiled library
+    uses: int = 0  # solves of this structure in this process
+    # one IPOPT run of this solver at a time: its stats() are those of the last call
+    lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+
+    def refresh(self) -> None:
+        """Count a use of the solver; switch to the compiled library when it is in the cache;
+        in mode ``auto``, start its background build at the second use."""
+        self.uses += 1
+        if self.library or self.library_key is None:
+            return
+        solver = codegen.load(self.library_key, self.ipopt_options)
+        if solver is not None:
+            self.solver, self.library = solver, True
+        elif self.codegen_mode == "auto" and self.uses >= codegen.AUTO_BUILD_AFTER_USES:
+            codegen.build_in_background(self.library_key, self.solver, self.nlp)
+
+
+def _layout(blocks: dict[str, Any], size: Any) -> dict[str, slice]:
+    out, k = {}, 0
+    for name, item in blocks.items():
+        n = size(item)
+        out[name] = slice(k, k + n)
+        k += n
+    return out
+
+
+@dataclass
+class _Program(_Layout):
+    """The symbolic program of one structure: min f(x, p) s.t. lbg <= g(x, p) <= ubg,
+    lbx <= x <= ubx, with the layout of x, p and g, shared by its solver-option variants."""
+
+    x: ca.SX
+    p: ca.SX
+    f: ca.SX
+    g: ca.SX
+    function: ca.Function  # (x, p) -> (f, g)
+    outputs: ca.Function  # (x, p) -> outputs and cost terms
+    # the declared pieces, kept for derivative_functions (built on first use)
+    declared: NLP | None = None
+    _derivatives: dict[str, ca.Function] | None = field(default=None, repr=False)
+
+    @property
+    def derivative_functions(self) -> dict[str, ca.Function]:
+        """nlpsol's "jac_g" and "hess_lag" when some block has hand-built derivatives, else
+        empty; built only when a solver is built from the expressions (a library loaded from
+        the disk cache has them compiled: Talos near-body, 110 ms saved per structure)."""
+        if self._derivatives is None:
+            has = self.declared is not None and bool(self.declared.derivatives)
+            self._derivatives = (
+                _derivative_functions(self.declared, self.x, self.p, self.f, self.g, self.g_index)
+                if has
+                else {}
+            )
+        return self._derivatives
+
+    @property
+    def derivative_key(self) -> str:
+        """What the library key adds for hand-built derivatives: the source of the package
+        (the code that writes them), so that any change to it builds the library again; ""
+        without them. Cheaper than serializing the derivative functions (140 ms)."""
+        has = self.declared is not None and bool(self.declared.derivatives)
+        return _source_digest() if has else ""
+
+
+CACHE_SIZE = 32
+# compiled solvers by structure and solver options; symbolic programs by structure
+_CACHE: BoundedCache[CompiledNLP] = BoundedCache("compiled solvers", CACHE_SIZE)
+_PROGRAMS: BoundedCache[_Program] = BoundedCache("symbolic programs", CACHE_SIZE)
+
+
+def is_compiled(program: Compilable) -> bool:
+    """Whether the solver of this structure and these options is in the cache."""
+    return program.key() in _CACHE
+
+
+def compile_program(program: Compilable) -> CompiledNLP:
+    """The compiled program for this structure and these solver options (built once, then
+    cached; the symbolic program is shared by every solver-option variant)."""
+    key = program.key()
+    cached = _CACHE.get(key)
+    if cached is not None:
+        return cached
+    t0 = time.perf_counter()
+    prog = symbolic(program)
+    opts = program.solver_options.ipopt()
+    mode = program.solver_options.codegen_mode()
+    lib_key = codegen.library_key(prog.function, prog.derivative_key) if mode != "off" else None
+    # the structure's library from the disk cache: no SX derivatives to build
+    solver = codegen.load(lib_key, opts) if lib_key is not None else None
+    library = solver is not None
+    if solver is None:
+        solver = ca.nlpsol(
+            "posture",
+            "ipopt",
+            {"x": prog.x, "p": prog.p, "f": prog.f, "g": prog.g},
+            {**opts, **prog.derivative_functions},
+        )
+        if mode == "sync" and lib_key is not None:
+            codegen.build(lib_key, solver, prog.function)
+            built = codegen.load(lib_key, opts)
+            if built is not None:
+                solver, library = built, True
+    compiled = CompiledNLP(
+        key=key,
+        solver=solver,
+        nlp=prog.function,
+        outputs=prog.outputs,
+        **{f.name: getattr(prog, f.name) for f in fields(_Layout)},
+        build_time_s=time.perf_counter() - t0,
+        ipopt_options=opts,
+        codegen_mode=mode,
+        library_key=lib_key,
+        library=library,
+    )
+    return _CACHE.put(key, compiled)
+
+
+def symbolic(program: Compilable) -> _Program:
+    """The symbolic program of this structure (declared once, then cached)."""
+    return _PROGRAMS.get_or_make(program.key()[:3], lambda: _declare(program))
+
+
+def _declare(program: Compilable) -> _Program:
+    """Every term declares its pieces; the program's vectors, functions and layout."""
+    nlp = NLP()
+    ctx = BuildContext(robot=program.robot, nlp=nlp, kin=program.robot.kinematics)
+    for term in program.terms():
+        term.declare(ctx)
+    if program.elastic is not None:
+        soften(nlp, program.elastic)
+    x = ca.vertcat(*[v[0] for v in nlp.x.values()])
+    p = ca.vertcat(*nlp.p.values()) if nlp.p else ca.SX(0, 1)
+    g = ca.vertcat(*[v[0] for v in nlp.g.values()])
+    cost = sum(nlp.costs.values()) if nlp.costs else ca.SX(0)
+    names = list(nlp.outputs)
+    return _Program(
+        x=x,
+        p=p,
+        f=cost,
+        g=g,
+        function=ca.Function("nlp", [x, p], [cost, g], ["x", "p"], ["f", "g"]),
+        outputs=ca.Function(
+            "outputs",
+            [x, p],
+            [nlp.outputs[n] for n in names] + [nlp.costs[n] for n in nlp.costs],
+            ["x", "p"],
+            names + [f"cost.{n}" for n in nlp.costs],
+        ),
+        x_index=_layout(nlp.x, lambda v: v[0].shape[0]),
+        p_index=_layout(nlp.p, lambda v: v.shape[0]),
+        g_index=_layout(nlp.g, lambda v: v[0].shape[0]),
+        cost_names=list(nlp.costs),
+        lbx=np.concatenate([v[1] for v in nlp.x.values()]),
+        ubx=np.concatenate([v[2] for v in nlp.x.values()]),
+        lbg=np.concatenate([v[1] for v in nlp.g.values()]),
+        ubg=np.concatenate([v[2] for v in nlp.g.values()]),
+        declared=nlp,
+    )
+
+
+def numeric(
+    program: Compilable, compiled: _Layout
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(x0, p, lbg, ubg) of this instance for a compiled structure."""
+    x0 = np.zeros(compiled.n_x)
+    p = np.zeros(sum(s.stop - s.start for s in compiled.p_index.values()))
+    lbg, ubg = compiled.lbg.copy(), compiled.ubg.copy()
+    for term in program.terms():
+        for name, value in term.parameters(program).items():
+            p[compiled.p_index[name]] = np.ravel(value, order="F")
+        for name, value in term.initial_guess(program).items():
+            x0[compiled.x_index[name]] = np.ravel(value, order="F")
+        for name, (lb, ub) in term.bounds(program).items():
+            lbg[compiled.g_index[name]] = lb
+            ubg[compiled.g_index[name]] = ub
+    return x0, p, lbg, ubg
+
+
+def summary(program: Compilable) -> str:
+    """Human-readable sizes of the program: variable and constraint blocks, cost terms."""
+    c = symbolic(program)
+    model = program.robot.model
+    lines = [
+        f"robot {program.robot.name}: nq={model.nq}, nv={model.nv}",
+        f"variables: {c.n_x}",
+    ]
+    lines += [f"  {n}: {s.stop - s.start}" for n, s in c.x_index.items()]
+    lines.append(f"constraints: {c.n_g}")
+    lines += [f"  {n}: {s.stop - s.start}" for n, s in c.g_index.items()]
+    lines.append("costs: " + ", ".join(c.cost_names))
+    return "\n".join(lines)
+
+
+def constraint_counts(program: Compilable) -> dict[str, int]:
+    """Rows per constraint block."""
+    c = symbolic(program)
+    return {n: s.stop - s.start for n, s in c.g_index.items()}
+
+
+@memoize("source digest", 1)
+def _source_digest() -> str:
+    """SHA-256 (16 hex digits) of the package's Python sources."""
+    h = hashlib.sha256()
+    root = Path(__file__).parent.parent
+    for path in sorted(root.rglob("*.py")):
+        h.update(str(path.relative_to(root)).encode() + path.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def _derivative_functions(
+    nlp: NLP, x: ca.SX, p: ca.SX, cost: ca.SX, g: ca.SX, index: dict[str, slice]
+) -> dict[str, ca.Function]:
+    """nlpsol's ``jac_g`` and ``hess_lag`` for a program with hand-built block derivatives:
+    CasADi's automatic derivatives of every other block (one Jacobian and one Hessian, so that
+    they share their subexpressions) plus each block's own, placed at the columns of its z."""
+    lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", g.shape[0])
+    own = [np.arange(index[n].start, index[n].stop) for n in nlp.derivatives]
+    rest = np.setdiff1d(np.arange(g.shape[0]), np.concatenate(own)).tolist()
+    jac_rest = ca.jacobian(g[rest], x)
+    H = ca.hessian(lam_f * cost + ca.dot(lam_g[rest], g[rest]), x)[0]
+    rows: dict[int, ca.SX] = {int(r): jac_rest[k, :] for k, r in enumerate(rest)}
+    for name, given in nlp.derivatives.items():
+        sl = index[name]
+        d = given if isinstance(given, BlockDerivatives) else given()
+        check_derivatives(name, d, sl.stop - sl.start)
+        cols = _columns(d.z, x)
+        J = ca.SX(sl.stop - sl.start, x.shape[0])
+        J[:, cols] = d.jacobian
+        for k in range(sl.stop - sl.start):
+            rows[sl.start + k] = J[k, :]
+        Hb = ca.SX(x.shape[0], x.shape[0])
+        Hb[cols, cols] = ca.substitute(d.hessian, d.lam, lam_g[sl])
+        H = H + Hb
+    jac = ca.vertcat(*[rows[r] for r in range(g.shape[0])])
+    return {
+        "jac_g": ca.Function("nlp_jac_g", [x, p], [g, jac], ["x", "p"], ["g", "jac_g_x"]),
+        "hess_lag": ca.Function(
+            "nlp_hess_l",
+            [x, p, lam_f, lam_g],
+            [ca.triu(H)],
+            ["x", "p", "lam_f", "lam_g"],
+            ["triu_hess_gamma_x_x"],
+        ),
+    }
+
+
+def _columns(z: ca.SX, x: ca.SX) -> list[int]:
+    """Where each symbol of z sits in x (∂z/∂x is a selection matrix)."""
+    if not all(z[k].is_symbolic() for k in range(z.shape[0])):
+        raise SolveError("a block's derivatives must be taken w.r.t. variables of the program")
+    rows, cols = ca.jacobian(z, x).sparsity().get_triplet()
+    if sorted(rows) != list(range(z.shape[0])):
+        raise SolveError("a block's derivatives are taken w.r.t. symbols that are not variables")
+    return [c for _, c in sorted(zip(rows, cols, strict=True))]

@@ -1,0 +1,244 @@
+"""The posture problem (paper eq. 1) as data, and what one IPOPT run solves of it.
+
+A :class:`Problem` lists *terms* (the contacts, tasks, costs; the configuration and the static
+equilibrium are added by :meth:`Program.terms`) and the initial posture. Building is separate
+from solving: :func:`posturegen.solver.solve.solve` never writes on a Problem. What a solve
+changes for one IPOPT run (the torque-limit scale of a continuation, the collision options, the
+solver options, the active collision rows) is a :class:`Program`: the problem and those
+overrides, a frozen value of the solve's own. The compiled program of a structure is cached by
+:mod:`posturegen.solver.compile`."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .._cache import Ref
+from ..collision.boxes import CollisionOptions
+from ..model.robot import Robot
+from ..model.scene import Scene
+from ..terms.configuration import ConfigurationTerm
+from ..terms.contacts import Contact
+from ..terms.elastic import Elastic
+from ..terms.equilibrium import StaticEquilibrium
+from ..terms.nlp import Term
+from . import codegen
+from .compile import CompiledNLP, compile_program, constraint_counts, numeric, summary
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """IPOPT settings."""
+
+    tol: float = 1e-8
+    constr_viol_tol: float = 1e-9
+    max_iter: int = 200
+    max_cpu_time: float = 30.0
+    print_level: int = 0
+    # Generated C for the program's functions (posturegen.solver.codegen): "auto" compiles a
+    # structure
+    # in the background once it is reused and loads it from the disk cache in later sessions,
+    # "sync" compiles before the first solve, "off" keeps CasADi's virtual machine; None:
+    # $POSTUREGEN_CODEGEN, else "auto". Without a C compiler: "off".
+    codegen: str | None = None
+    # the same as codegen="sync" (compile before the first solve; kept for problem files)
+    jit: bool = False
+    # start from given primal and dual values (active-set re-solves of collision avoidance)
+    warm_start: bool = False
+    # IPOPT's initial barrier parameter and strategy (None: monotone from IPOPT's 0.1)
+    mu_init: float | None = None
+    mu_strategy: str = "monotone"
+    # IPOPT's first Hessian regularization δ and its growth factor while the KKT matrix's
+    # inertia is wrong (None: IPOPT's 1e-4 and 100)
+    first_hessian_perturbation: float | None = None
+    perturb_inc_fact_first: float | None = None
+
+    def ipopt(self) -> dict[str, Any]:
+        """The options dict passed to casadi.nlpsol."""
+        opts: dict[str, Any] = {
+            "ipopt.tol": self.tol,
+            "ipopt.constr_viol_tol": self.constr_viol_tol,
+            "ipopt.max_iter": self.max_iter,
+            "ipopt.max_cpu_time": self.max_cpu_time,
+            "ipopt.print_level": self.print_level,
+            "ipopt.sb": "yes",
+            # measured on the talos-stand-reach family: same success, 9 % faster than adaptive
+            "ipopt.mu_strategy": self.mu_strategy,
+            "ipopt.bound_relax_factor": 0.0,
+            "print_time": False,
+            "error_on_fail": False,
+        }
+        if self.mu_init is not None:
+            opts["ipopt.mu_init"] = self.mu_init
+        if self.first_hessian_perturbation is not None:
+            opts["ipopt.first_hessian_perturbation"] = self.first_hessian_perturbation
+        if self.perturb_inc_fact_first is not None:
+            opts["ipopt.perturb_inc_fact_first"] = self.perturb_inc_fact_first
+        if self.warm_start:
+            opts.update(
+                {
+                    "ipopt.warm_start_init_point": "yes",
+                    "ipopt.mu_init": 1e-5,
+                    "ipopt.warm_start_bound_push": 1e-6,
+                    "ipopt.warm_start_bound_frac": 1e-6,
+                    "ipopt.warm_start_slack_bound_push": 1e-6,
+                    "ipopt.warm_start_slack_bound_frac": 1e-6,
+                    "ipopt.warm_start_mult_bound_push": 1e-6,
+                }
+            )
+        return opts
+
+    def codegen_mode(self) -> str:
+        """The effective generated-C mode (see :mod:`posturegen.solver.codegen`)."""
+        return codegen.resolve_mode("sync" if self.jit else self.codegen)
+
+
+@dataclass
+class Problem:
+    """A posture problem: robot, scene, terms and the initial posture.
+
+    Build it with :func:`posturegen.io.problem_file.problem_from_dict` or by hand; inspect it with
+    :meth:`summary`; solve it with :func:`posturegen.solver.solve.solve` (which never writes on
+    it: one Problem can be solved from several threads at once).
+    """
+
+    robot: Robot
+    scene: Scene
+    contacts: list[Contact]
+    tasks: list[Term]
+    costs: list[Term]
+    q_init: np.ndarray  # (nq,) initial posture: warm start and posture-cost reference
+    self_collision: bool = False
+    torque_limit_scale: float = 1.0  # |τ_j| <= scale·effort_j
+    solver_options: SolverOptions = field(default_factory=SolverOptions)
+    collision_options: CollisionOptions | None = None  # None: no avoidance
+    # [m] CoP margin of force-bearing contacts made from this problem's (posturegen.climb.stance);
+    # None: posturegen.terms.cop.DEFAULT_COP_MARGIN
+    cop_margin: float | None = None
+    # hard rows relaxed by L1-penalized slacks (posturegen.terms.elastic; the diagnosis of a
+    # failure solves a copy of the problem with it); None: the real program
+    elastic: Elastic | None = None
+
+    def terms(self) -> list[Term]:
+        """Every term in declaration order (without collision rows: a solve adds them)."""
+        return Program.of(self).terms()
+
+    def key(self) -> tuple[Any, ...]:
+        """The structure key: robot, each term's key, the elastic relaxation, solver options."""
+        return Program.of(self).key()
+
+    def compile(self) -> CompiledNLP:
+        """The compiled program of this structure and solver options (cached)."""
+        return Program.of(self).compile()
+
+    def numeric(
+        self, compiled: CompiledNLP
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(x0, p, lbg, ubg) of this instance for a compiled structure."""
+        return numeric(Program.of(self), compiled)
+
+    def summary(self) -> str:
+        """Human-readable sizes of the program: variable and constraint blocks, cost terms
+        (no collision rows; :func:`posturegen.solver.inspection.describe` adds those a solve
+        starts with)."""
+        return summary(Program.of(self))
+
+    def constraint_counts(self) -> dict[str, int]:
+        """Rows per constraint block."""
+        return constraint_counts(Program.of(self))
+
+
+@dataclass(frozen=True, eq=False)
+class Program:
+    """What one IPOPT run solves: ``problem`` with the solve's overrides (solver options,
+    torque-limit scale, collision options) and its active collision rows. The terms read the
+    instance through it (:class:`posturegen.terms.nlp.Instance`)."""
+
+    problem: Problem
+    solver_options: SolverOptions
+    torque_limit_scale: float
+    collision_options: CollisionOptions | None
+    collision_term: Term | None = None
+
+    @classmethod
+    def of(cls, problem: Problem, **overrides: Any) -> Program:
+        """The problem as it is, with ``overrides`` of the fields above."""
+        program = cls(
+            problem, problem.solver_options, problem.torque_limit_scale, problem.collision_options
+        )
+        return dataclasses.replace(program, **overrides) if overrides else program
+
+    def but(self, **overrides: Any) -> Program:
+        """This program with other overrides."""
+        return dataclasses.replace(self, **overrides)
+
+    @property
+    def robot(self) -> Robot:
+        return self.problem.robot
+
+    @property
+    def scene(self) -> Scene:
+        return self.problem.scene
+
+    @property
+    def contacts(self) -> list[Contact]:
+        return self.problem.contacts
+
+    @property
+    def tasks(self) -> list[Term]:
+        return self.problem.tasks
+
+    @property
+    def q_init(self) -> np.ndarray:
+        return self.problem.q_init
+
+    @property
+    def costs(self) -> list[Term]:
+        return self.problem.costs
+
+    @property
+    def self_collision(self) -> bool:
+        return self.problem.self_collision
+
+    @property
+    def elastic(self) -> Elastic | None:
+        return self.problem.elastic
+
+    def terms(self) -> list[Term]:
+        """Every term in declaration order."""
+        extra = [self.collision_term] if self.collision_term is not None else []
+        return [
+            ConfigurationTerm(),
+            *self.problem.contacts,
+            *self.problem.tasks,
+            *extra,
+            StaticEquilibrium(),
+            *self.problem.costs,
+        ]
+
+    def key(self) -> tuple[Any, ...]:
+        """The structure key: the robot's model (held, :class:`posturegen._cache.Ref`), each
+        term's key, the elastic relaxation, the solver options."""
+        return (
+            Ref(self.robot.model),
+            tuple(t.key() for t in self.terms()),
+            self.elastic,
+            self.solver_options,
+        )
+
+    def compile(self) -> CompiledNLP:
+        """The compiled program of this structure and solver options (cached)."""
+        return compile_program(self)
+
+    def numeric(
+        self, compiled: CompiledNLP
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(x0, p, lbg, ubg) of this instance for a compiled structure."""
+        return numeric(self, compiled)
+
+    def summary(self) -> str:
+        """Human-readable sizes of the program (with its collision rows)."""
+        return summary(self)

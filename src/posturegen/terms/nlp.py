@@ -1,0 +1,175 @@
+"""The pieces every term of the posture problem shares: the symbolic program being declared
+(:class:`NLP`), what terms share while declaring (:class:`BuildContext`), the term interface
+(:class:`Term`), hand-built block derivatives (:class:`BlockDerivatives`) and what a term reads
+of the instance it is solved for (:class:`Instance`).
+
+A term declares its variables, parameters, constraints and costs once per problem *structure*
+(:meth:`Term.key`), and gives the numeric parameter values, initial guess and bounds of one
+instance."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import casadi as ca
+import numpy as np
+
+from ..errors import SolveError
+from ..model.kinematics import CasadiKinematics, KinematicState, so3_exp
+from ..model.robot import Robot
+from ..model.scene import Scene
+
+ArrayLike = np.ndarray | float
+
+
+@dataclass(frozen=True)
+class BlockDerivatives:
+    """Hand-built derivatives of a constraint block g_b that depends on the variables only
+    through z (nz,), a vector of them: ``jacobian`` (rows, nz) = ∂g_b/∂z and ``hessian``
+    (nz, nz) = ∇²_z(λᵀg_b) as an expression of the symbols ``lam`` (rows,). The program uses
+    them in place of CasADi's automatic derivatives of the block (tested equal to them)."""
+
+    z: ca.SX
+    jacobian: ca.SX
+    lam: ca.SX
+    hessian: ca.SX
+
+
+class NLP:
+    """Symbolic pieces of one program: x (variables), p (parameters), g (constraints), cost."""
+
+    def __init__(self) -> None:
+        self.x: dict[str, tuple[ca.SX, np.ndarray, np.ndarray]] = {}
+        self.p: dict[str, ca.SX] = {}
+        self.g: dict[str, tuple[ca.SX, np.ndarray, np.ndarray]] = {}
+        # a block's own derivatives, or the function that builds them when they are needed
+        self.derivatives: dict[str, BlockDerivatives | Callable[[], BlockDerivatives]] = {}
+        self.costs: dict[str, ca.SX] = {}
+        self.outputs: dict[str, ca.SX] = {}
+
+    def variable(self, name: str, n: int, lb: ArrayLike = -np.inf, ub: ArrayLike = np.inf) -> ca.SX:
+        """Declare n variables with (constant) bounds."""
+        if name in self.x:
+            raise SolveError(f"variable block '{name}' declared twice")
+        sym = ca.SX.sym(name, n)
+        self.x[name] = (
+            sym,
+            np.broadcast_to(lb, (n,)).astype(float),
+            np.broadcast_to(ub, (n,)).astype(float),
+        )
+        return sym
+
+    def parameter(self, name: str, n: int) -> ca.SX:
+        """Declare n parameters, given numerically at each solve."""
+        if name in self.p:
+            raise SolveError(f"parameter block '{name}' declared twice")
+        self.p[name] = ca.SX.sym(name, n)
+        return self.p[name]
+
+    def constrain(
+        self,
+        name: str,
+        expr: ca.SX,
+        lb: ArrayLike,
+        ub: ArrayLike,
+        derivatives: BlockDerivatives | Callable[[], BlockDerivatives] | None = None,
+    ) -> None:
+        """lb <= expr <= ub (use lb == ub for equalities); ``derivatives``: the block's own
+        Jacobian and Hessian (see :class:`BlockDerivatives`), or a function that builds them
+        (called only when a solver is built from the expressions)."""
+        if name in self.g:
+            raise SolveError(f"constraint block '{name}' declared twice")
+        expr = ca.vec(ca.SX(expr))
+        n = expr.shape[0]
+        if derivatives is not None:
+            if isinstance(derivatives, BlockDerivatives):
+                check_derivatives(name, derivatives, n)
+            self.derivatives[name] = derivatives
+        self.g[name] = (
+            expr,
+            np.broadcast_to(lb, (n,)).astype(float),
+            np.broadcast_to(ub, (n,)).astype(float),
+        )
+
+    def minimize(self, name: str, expr: ca.SX) -> None:
+        """Add a scalar term to the cost."""
+        self.costs[name] = self.costs.get(name, 0) + expr
+
+    def output(self, name: str, expr: ca.SX) -> None:
+        """An expression evaluated at the solution (torques, world points...)."""
+        self.outputs[name] = ca.vec(ca.SX(expr))
+
+
+@dataclass
+class BuildContext:
+    """What terms share while declaring: the robot, its symbolic state, contact forces."""
+
+    robot: Robot
+    nlp: NLP
+    kin: CasadiKinematics
+    state: KinematicState | None = None
+    base_position: ca.SX | None = None  # (3,)
+    base_rotation: ca.SX | None = None  # (3,) w of R_base = R0·exp([w]×)
+    joints: ca.SX | None = None  # (nj,)
+    # (joint id, world point (3,), world force on the robot (3,)) of every force-bearing point
+    force_points: list[tuple[int, ca.SX, ca.SX]] = field(default_factory=list)
+    torques: ca.SX | None = None  # (nj,) actuated joint torques, set by the equilibrium
+
+
+class Term(ABC):
+    """Something that adds variables, constraints or costs to the posture problem."""
+
+    name: str
+
+    @abstractmethod
+    def key(self) -> tuple[Any, ...]:
+        """Everything that changes the program's structure (not its parameter values)."""
+
+    @abstractmethod
+    def declare(self, ctx: BuildContext) -> None:
+        """Add symbolic variables, parameters, constraints and costs to ``ctx.nlp``."""
+
+    def parameters(self, problem: Instance) -> dict[str, np.ndarray]:
+        """Numeric values of the parameters this term declared."""
+        return {}
+
+    def initial_guess(self, problem: Instance) -> dict[str, np.ndarray]:
+        """Initial values of the variables this term declared (zero when absent)."""
+        return {}
+
+    def bounds(self, problem: Instance) -> dict[str, tuple[ArrayLike, ArrayLike]]:
+        """Per-instance (lb, ub) of constraint blocks, overriding the declared ones."""
+        return {}
+
+
+class Instance(Protocol):
+    """What terms read of the instance being solved (a problem with the solve's overrides,
+    :class:`posturegen.solver.problem.Program`): the robot, the scene, the contacts, the initial
+    posture, the torque-limit scale and the collision options."""
+
+    @property
+    def robot(self) -> Robot: ...
+    @property
+    def scene(self) -> Scene: ...
+    @property
+    def contacts(self) -> Sequence[Any]: ...
+    @property
+    def q_init(self) -> np.ndarray: ...
+    @property
+    def torque_limit_scale(self) -> float: ...
+    @property
+    def collision_options(self) -> Any: ...
+
+
+def check_derivatives(name: str, d: BlockDerivatives, rows: int) -> None:
+    """A block's hand-built Jacobian has one row per constraint row and one column per z."""
+    if d.jacobian.shape != (rows, d.z.shape[0]):
+        raise SolveError(f"constraint block '{name}': Jacobian of the wrong shape")
+
+
+def base_rotation(R0: ca.SX, w: ca.SX) -> ca.SX:
+    """Base orientation R = R0 · exp([w]×): a local exponential map around the initial one."""
+    return R0 @ so3_exp(w)
