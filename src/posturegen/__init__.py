@@ -19,6 +19,7 @@ from .errors import (
     PosturegenWarning,
     SolveError,
 )
+from .planner import PlanReport, plan
 from .problem import Problem, SolverOptions
 from .robot import Robot, load_robot
 from .scene import Obstacle, Scene, Surface
@@ -27,6 +28,8 @@ from .spec import load_problem, problem_from_dict
 from .verify import VerifyReport, verify_posture
 
 __all__ = [
+    "PlanReport",
+    "plan",
     "BatchError",
     "ImplausibleValueWarning",
     "InputError",
