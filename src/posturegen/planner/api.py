@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError
+from ..problem import Problem
 from ..robot import Robot
 from ..sequence import SequenceReport, stage_problem_dict
 from ..solve import Result, solve
@@ -79,29 +80,30 @@ def _source(
     return seq, {"name": "start", "contacts": copy.deepcopy(data["contacts"])}, None
 
 
-def _start(seq: Mapping[str, Any], stage: Mapping[str, Any], solver: RoundSolver) -> Node:
+def _start_problem(seq: Mapping[str, Any], stage: Mapping[str, Any]) -> tuple[dict, Problem]:
+    """The start stance's problem dict and Problem (its robot, scene and contacts)."""
+    data = stage_problem_dict(dict(seq), dict(stage), 0, None, None)
+    return data, problem_from_dict(data)
+
+
+def _start(seq: Mapping[str, Any], data: dict, problem: Problem, solver: RoundSolver) -> Node:
     """The start stance: its problem solved (each floating contact then fixed where it was
     realized, in a second posture)."""
-    data = stage_problem_dict(dict(seq), dict(stage), 0, None, None)
-    problem = problem_from_dict(data)
     result = solver.solve([data], [problem])[0]
     if not isinstance(result, Result) or not result.success:
-        raise InputError(
-            "start", "the start stance holds no verified posture", getattr(result, "message", "")
-        )
-    stages = [Stage(str(stage["name"]), data, problem, result)]
+        why = getattr(result, "message", "")
+        raise InputError("start", "the start stance holds no verified posture", why)
+    stages = [Stage(str(data["name"]), data, problem, result)]
     if any(c.type != "fixed" for c in problem.contacts):
-        keep = {
-            "name": "start (fixed)",
-            "contacts": [{"name": c.name, "type": "keep"} for c in problem.contacts],
-        }
-        data = stage_problem_dict(dict(seq), keep, 1, problem, result.q)
+        keep = [{"name": c.name, "type": "keep"} for c in problem.contacts]
+        data = stage_problem_dict(
+            dict(seq), {"name": "start (fixed)", "contacts": keep}, 1, problem, result.q
+        )
         problem = problem_from_dict(data)
         result = solve(problem)
         if not result.success:
-            raise InputError(
-                "start", "the start stance, fixed, holds no verified posture", result.message
-            )
+            why = result.message
+            raise InputError("start", "the start stance, fixed, holds no verified posture", why)
         stages.append(Stage("start (fixed)", data, problem, result))
     key = frozenset((c.patch.name, c.surface.name) for c in problem.contacts)
     contacts = {c.patch.name: c.name for c in problem.contacts}
@@ -114,6 +116,23 @@ def _heuristic(goal: Goal, rules: Rules, start: Node, robot: Robot) -> Heuristic
     frame = frame_position(goal.frame, start.q, robot)
     spots = goal_spots(goal, areas, start.positions, frame)
     return Heuristic(goal, areas, spots, 3 if rules.hands else 2)
+
+
+def _inputs(
+    seq: Mapping[str, Any], scene_name: str | None, problem: Problem, goal: Any, rules: Any
+) -> tuple[Goal, Rules]:
+    """The goal and rules, checked against the start problem's robot and scene."""
+    model = problem.robot
+    surfaces = list(problem.scene.surfaces)
+    base = scene_rules(scene_name, seq, model) if scene_name else default_rules(model, surfaces)
+    the_rules = parse_rules(_as_mapping(rules, "rules"), base)
+    goal_value = _as_mapping(goal, "goal")
+    if goal_value is None:
+        if scene_name is None:
+            raise InputError("goal", "missing", "give a goal: contacts, or frame and point")
+        goal_value = default_goal(seq)
+    frames = [f.name for f in model.model.frames]
+    return parse_goal(goal_value, list(model.patches), surfaces, frames), the_rules
 
 
 def plan(
@@ -135,19 +154,11 @@ def plan(
     a scene has defaults); ``workers`` > 1 solves sibling transitions on the batch pool."""
     seq, start_stage, scene_name = _source(source, robot, steps)
     budget = budget or Budget()
+    data, problem = _start_problem(seq, start_stage)
+    the_goal, the_rules = _inputs(seq, scene_name, problem, goal, rules)
     with RoundSolver(workers) as solver:
-        start = _start(seq, start_stage, solver)
-        model = start.last.problem.robot
-        surfaces = list(start.last.problem.scene.surfaces)
-        base = scene_rules(scene_name, seq, model) if scene_name else default_rules(model, surfaces)
-        the_rules = parse_rules(_as_mapping(rules, "rules"), base)
-        goal_value = _as_mapping(goal, "goal")
-        if goal_value is None:
-            if scene_name is None:
-                raise InputError("goal", "missing", "give a goal: contacts or frame and point")
-            goal_value = default_goal(seq)
-        frames = [f.name for f in model.model.frames]
-        the_goal = parse_goal(goal_value, list(model.patches), surfaces, frames)
+        start = _start(seq, data, problem, solver)
+        model = problem.robot
         heur = _heuristic(the_goal, the_rules, start, model)
         search = Search(seq, heur, the_rules, solver, budget, progress)
         start.extra["frame"] = frame_position(the_goal.frame, start.q, model)
@@ -155,8 +166,7 @@ def plan(
         best, stats = search.run(start)
     path = best.path()
     report, quality = write_sequence(seq, path, stats.reached, Path(out))
-    summary = plan_summary(
-        seq, the_goal.to_dict(), the_rules.to_dict(), budget, stats, path, quality
-    )
+    goal_d, rules_d = the_goal.to_dict(), the_rules.to_dict()
+    summary = plan_summary(seq, goal_d, rules_d, budget, stats, path, quality)
     (Path(out) / "plan.json").write_text(json.dumps(summary, indent=1))
     return PlanReport(report, stats, quality, the_goal, the_rules, summary)

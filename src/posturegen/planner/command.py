@@ -76,8 +76,12 @@ def cmd_plan(args: argparse.Namespace) -> int:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """The ``plan`` sub-command's arguments."""
     p = sub.add_parser("plan", help="search a contact sequence to a goal (stairs, ladders)")
-    p.add_argument("source", metavar="SCENE_OR_PROBLEM", help="stairs, ladder-inclined, "
-                   "ladder-vertical, or a problem file whose contacts are the start stance")
+    p.add_argument(
+        "source",
+        metavar="SCENE_OR_PROBLEM",
+        help="stairs, ladder-inclined, "
+        "ladder-vertical, or a problem file whose contacts are the start stance",
+    )
     p.add_argument("--goal", help="goal file or JSON (default for a scene: both feet on its top)")
     p.add_argument("--rules", help="rules file or JSON (default: the robot's, the scene's)")
     p.add_argument("--out", required=True, help="directory for sequence.json and plan.json")
