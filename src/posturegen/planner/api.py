@@ -19,7 +19,7 @@ from .goal import Goal, parse_goal
 from .heuristic import Heuristic
 from .layout import goal_spots, regions
 from .node import Node, Stage
-from .output import plan_summary, write_sequence
+from .output import plan_summary, write_failed, write_sequence
 from .quality import Quality
 from .rules import Rules, default_rules, parse_rules, patch_positions
 from .scenes import PLANS, default_goal, plan_scene, scene_rules
@@ -166,6 +166,7 @@ def plan(
         best, stats = search.run(start)
     path = best.path()
     report, quality = write_sequence(seq, path, stats.reached, Path(out))
+    write_failed(stats, Path(out))
     goal_d, rules_d = the_goal.to_dict(), the_rules.to_dict()
     summary = plan_summary(seq, goal_d, rules_d, budget, stats, path, quality)
     (Path(out) / "plan.json").write_text(json.dumps(summary, indent=1))

@@ -13,7 +13,11 @@ from ..scene import Scene, Surface
 from .goal import Goal
 
 GRID = 9  # candidate points per side of a surface's bounding box
-EDGE_MARGIN = 0.03  # [m] candidate points this far inside a surface (at most 30 % of its inradius)
+# [m] candidate points this far inside a surface, at most 90 % of its inradius: on a step or a
+# rung, its middle line (a target at the back edge of a stair step put Talos' toes against the
+# next riser and IPOPT found the touch infeasible)
+EDGE_MARGIN = 0.1
+EDGE_SHARE = 0.9
 
 
 @dataclass(frozen=True)
@@ -45,9 +49,10 @@ class Region:
         return self.surface.to_world(np.array([[c.x, c.y]]))[0]
 
     def candidates(self) -> np.ndarray:
-        """(k, 3) world points on a grid inside the polygon, EDGE_MARGIN from its edges."""
+        """(k, 3) world points on a grid inside the polygon, EDGE_MARGIN from its edges (at
+        most EDGE_SHARE of its inradius)."""
         inradius = float(shapely.maximum_inscribed_circle(self.polygon).length)
-        inner = self.polygon.buffer(-min(EDGE_MARGIN, 0.3 * inradius))
+        inner = self.polygon.buffer(-min(EDGE_MARGIN, EDGE_SHARE * inradius))
         if inner.is_empty:
             inner = self.polygon
         x0, y0, x1, y1 = inner.bounds

@@ -46,6 +46,17 @@ def write_sequence(
     return report, worst(qualities)
 
 
+def write_failed(stats: Stats, out: Path) -> None:
+    """The problem of every failed transition posture as ``DIR/failed/NN-name.yaml`` (each
+    solvable alone: ``posturegen solve`` diagnoses it)."""
+    if not stats.failed_problems:
+        return
+    folder = out / "failed"
+    folder.mkdir(parents=True, exist_ok=True)
+    for k, (name, data) in enumerate(stats.failed_problems):
+        (folder / f"{k:02d}-{_slug(name)}.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+
+
 def plan_summary(
     seq: Mapping[str, Any],
     goal: Mapping[str, Any],
@@ -69,6 +80,7 @@ def plan_summary(
         "stances_held": stats.held,
         "nodes_expanded": stats.expanded,
         "postures_solved": stats.postures,
+        "hold_fallbacks": stats.hold_fallbacks,
         "time_s": stats.time_s,
         "stances": [n.describe() for n in path],
         "transitions": [n.action.label() if n.action else "start" for n in path],

@@ -2,7 +2,9 @@
 ref. [8]): the open list holds transitions not yet tried, ordered by their child's estimated
 f; each round pops as many as there are workers, solves their postures together
 (posturegen.planner.solver), and pushes the successors of the stances that held. A stance is
-closed once held (its first posture is kept); a transition that failed is never tried again."""
+closed once held MAX_HOLDS times (by different transitions: another placement on the same
+surfaces can lead on where the first did not); a transition that failed is never tried again,
+and its problem is kept (``Stats.failed_problems``) for ``posturegen solve`` to diagnose."""
 
 from __future__ import annotations
 
@@ -28,6 +30,8 @@ from .rules import Rules, patch_positions
 from .solver import RoundSolver
 from .transitions import hold_stage, touch_stage, unload_stage
 
+MAX_HOLDS = 2  # postures kept per stance (set of patch-surface pairs)
+
 
 @dataclass(frozen=True)
 class Budget:
@@ -49,6 +53,8 @@ class Stats:
     reached: bool = False
     stop: str = ""
     failures: list[dict[str, str]] = field(default_factory=list)
+    failed_problems: list[tuple[str, dict[str, Any]]] = field(default_factory=list)
+    hold_fallbacks: int = 0  # adds whose hold failed: the touch posture held the stance
 
 
 Progress = Callable[[Stats, Node | None, str], None]
@@ -78,7 +84,7 @@ class Search:
         self.seq, self.heur, self.rules, self.solver = seq, heuristic, rules, solver
         self.budget, self.progress = budget, progress
         self.stats = Stats()
-        self.closed: set[Key] = set()
+        self.holds: dict[Key, int] = {}
         self.failed: set[tuple[Key, Action]] = set()
         self._open: list[tuple[float, int, Node, Action, Key]] = []
         self._count = itertools.count()
@@ -86,7 +92,7 @@ class Search:
     def run(self, start: Node) -> tuple[Node, Stats]:
         """Search from the start stance until the goal, the budget, or an empty open list."""
         t0 = time.perf_counter()
-        self.closed.add(start.key)
+        self.holds[start.key] = 1
         best = start
         self._push_successors(start)
         while True:
@@ -107,6 +113,9 @@ class Search:
         self.stats.postures = self.solver.solved
         return best, self.stats
 
+    def _closed(self, key: Key) -> bool:
+        return self.holds.get(key, 0) >= MAX_HOLDS
+
     def _stop_reason(self) -> str:
         if not self._open:
             return "no transition left to try"
@@ -123,7 +132,7 @@ class Search:
         room = min(self.solver.workers, self.budget.nodes - self.stats.tried)
         while self._open and len(out) < room:
             _, _, node, action, child = heapq.heappop(self._open)
-            if child in self.closed or child in keys or (node.key, action) in self.failed:
+            if self._closed(child) or child in keys or (node.key, action) in self.failed:
                 continue
             keys.add(child)
             out.append((node, action))
@@ -134,7 +143,7 @@ class Search:
         self.stats.expanded += 1
         for action in self._actions(node):
             child = action.child_key(node.key)
-            if child in self.closed:
+            if self._closed(child):
                 continue
             positions = dict(node.positions)
             if action.target is not None:
@@ -149,7 +158,9 @@ class Search:
         on = dict(node.key)
         out: list[Action] = []
         if len(on) > self.rules.min_contacts:
-            out += [Action("remove", p, s) for p, s in sorted(on.items())]
+            out += [
+                Action("remove", p, s) for p, s in sorted(on.items()) if not self._undo(node, p, s)
+            ]
         if len(on) >= self.rules.max_contacts:
             return out
         soles = [node.positions[p] for p in on if "sole" in p] or [node.positions[p] for p in on]
@@ -158,13 +169,20 @@ class Search:
                 continue
             rule = self.rules.patches[p]
             for s, region in self.heur.areas.items():
-                if not rule.allows(s):
+                if not rule.allows(s) or self._undo(node, p, s):
                     continue
                 anchors = [a for a in soles if a is not node.positions.get(p)]
                 target = pick_target(region, self.heur.spots[p], anchors, rule.reach)
                 if target is not None:
                     out.append(Action("add", p, s, tuple(float(v) for v in target)))
         return out
+
+    @staticmethod
+    def _undo(node: Node, patch: str, surface: str) -> bool:
+        """The transition would undo the one that led to the node (the same patch and
+        surface): never useful."""
+        a = node.action
+        return a is not None and (a.patch, a.surface) == (patch, surface)
 
     def _evaluate(self, round_: list[tuple[Node, Action]]) -> list[Node]:
         """Solve the round's transitions (touch or unload, then the holds): the new nodes."""
@@ -218,22 +236,31 @@ class Search:
     def _child(self, node: Node, action: Action, stages: list[tuple[Any, Any]]) -> Node | None:
         """The node of a transition whose postures were all verified, else None (cached as
         failed, with the diagnosis of the posture that failed)."""
-        want = 2 if action.kind == "add" else 1
         done = []
-        for built, answer in stages:
-            if built is None:
+        for k, (built, answer) in enumerate(stages):
+            if built is not None and isinstance(answer, Result) and answer.success:
+                done.append(Stage(built[0], built[1], built[2], answer))
+                continue
+            if built is not None:
+                self.stats.failed_problems.append((built[0], built[1]))
+                why = f"{built[0]}: {_why(answer)}"
+            else:
+                why = f"{action.label()}: its problem could not be built"
+            if k == 0:
+                if built is not None:  # else _build said why
+                    self._fail(node, action, why)
                 return None
-            if not isinstance(answer, Result) or not answer.success:
-                self._fail(node, action, f"{built[0]}: {_why(answer)}")
-                return None
-            done.append(Stage(built[0], built[1], built[2], answer))
-        if len(done) < want:
-            self._fail(node, action, "the touch posture held but its hold was not solved")
+            # the hold failed (IPOPT can stall where the touch left links close): the touch
+            # posture, verified, stands for the stance, its new contact unloaded
+            self.stats.hold_fallbacks += 1
+            if self.progress:
+                self.progress(self.stats, None, f"hold not verified, touch kept: {why}")
+        if not done:
             return None
         key = action.child_key(node.key)
-        if key in self.closed:
+        if self._closed(key):
             return None
-        self.closed.add(key)
+        self.holds[key] = self.holds.get(key, 0) + 1
         contacts = dict(node.contacts)
         if action.kind == "add":
             contacts[action.patch] = action.patch
