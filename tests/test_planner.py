@@ -18,6 +18,10 @@ from posturegen.geometry import ConvexPolygon
 from posturegen.planner import Budget, Goal, default_rules, parse_goal, parse_rules
 from posturegen.planner.heuristic import Heuristic
 from posturegen.planner.layout import Region, pick_target
+from posturegen.planner.node import Action, Node
+from posturegen.planner.rules import is_hand
+from posturegen.planner.search import Search
+from posturegen.planner.solver import RoundSolver
 from posturegen.robot import load_bundled
 from posturegen.scene import Surface
 from posturegen.verify import verify_posture
@@ -173,3 +177,50 @@ def test_heuristic_is_zero_exactly_when_the_goal_contacts_are_held():
     assert heur.h(top, pos, None) == 0.0 and heur.reached(top, None)
     assert heur.h(start, pos, None) > heur.h(half, pos, None) > 0 and not heur.reached(half, None)
     assert heur.f(0.0, 0.0, frozenset({("left_sole", "step2")})) > heur.f(0.0, 0.0, top)
+
+
+def _search_on_steps(rules):
+    surfaces = {
+        n: Surface(
+            n,
+            pin.SE3(np.eye(3), np.array([0.3 * k, 0, 0.12 * k])),
+            ConvexPolygon([[-0.1, -0.4], [0.1, -0.4], [0.1, 0.4], [-0.1, 0.4]]),
+        )
+        for k, n in enumerate(SURFACES)
+    }
+    areas = {n: Region.of(s) for n, s in surfaces.items()}
+    goal = Goal(contacts=(("left_sole", "step2"), ("right_sole", "step2")))
+    spots = {p: areas["step2"].centre() for p in PATCHES}
+    return Search({}, Heuristic(goal, areas, spots, 2), rules, RoundSolver(1), Budget())
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.dictionaries(st.sampled_from(PATCHES[:2]), st.sampled_from(SURFACES), min_size=1),
+    st.sampled_from(["add", "remove"]),
+    st.floats(0.1, 1.0),
+)
+def test_successors_follow_the_rules_and_never_undo(on, kind, reach):
+    """Removes keep min_contacts; adds put a free sole on an allowed surface within reach
+    of a sole in contact; no successor undoes the transition that led to the node."""
+    rules = parse_rules(
+        {"patches": {p: {"reach": reach, "surfaces": ["ground", "step*"]} for p in PATCHES[:2]}},
+        default_rules(load_bundled("atlas"), SURFACES),
+    )
+    search = _search_on_steps(rules)
+    key = frozenset(on.items())
+    p0, s0 = sorted(on.items())[0]
+    last = Action(kind, p0, s0)
+    positions = {
+        p: np.array([0.3 * SURFACES.index(on.get(p, "ground")), 0.0, 0.0]) for p in PATCHES
+    }
+    node = Node(key, {p: p for p in on}, (), positions, action=last)
+    for a in search._actions(node):
+        assert (a.patch, a.surface) != (p0, s0)
+        if a.kind == "remove":
+            assert len(on) > rules.min_contacts and on[a.patch] == a.surface
+        else:
+            assert a.patch not in on and rules.patches[a.patch].allows(a.surface)
+            assert not is_hand(a.patch)
+            d = min(np.linalg.norm(np.array(a.target) - positions[p]) for p in on)
+            assert d <= reach + 1e-9
