@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pinocchio as pin
 import pytest
+import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -139,22 +140,28 @@ rect = st.tuples(
 )
 def test_picked_target_lies_on_the_surface_within_reach(r, anchors, spot, reach):
     """A target is inside the polygon, in its plane, within reach of an anchor, and no
-    candidate within reach is nearer the spot; None only when nothing is within reach."""
+    point of a grid over the polygon within reach is nearer the spot (to the 32-gon's
+    0.5 % of the reach); None only when no grid point is within reach."""
     sx, sy, x, y, z = r
     v = [[-sx / 2, -sy / 2], [sx / 2, -sy / 2], [sx / 2, sy / 2], [-sx / 2, sy / 2]]
     T = pin.SE3(pin.rpy.rpyToMatrix(0.3, -0.2, 0.5), np.array([x, y, z]))
     region = Region.of(Surface("s", T, ConvexPolygon(v)))
     anchors_ = [np.array(a) for a in anchors]
     target = pick_target(region, np.array(spot), anchors_, reach)
-    pts = region.candidates()
-    near = [p for p in pts if min(np.linalg.norm(p - a) for a in anchors_) <= reach]
+    inner = region.inner()
+    x0, y0, x1, y1 = inner.bounds
+    gx, gy = np.meshgrid(np.linspace(x0, x1, 15), np.linspace(y0, y1, 15))
+    grid = np.column_stack([gx.ravel(), gy.ravel()])
+    grid = region.surface.to_world(grid[shapely.contains_xy(inner, grid[:, 0], grid[:, 1])])
+    near = [p for p in grid if min(np.linalg.norm(p - a) for a in anchors_) <= 0.99 * reach]
     if target is None:
         assert not near
         return
     assert region.distance(target) < 1e-9
-    assert min(np.linalg.norm(target - a) for a in anchors_) <= reach + 1e-12
-    best = min(np.linalg.norm(p - np.array(spot)) for p in near)
-    assert np.linalg.norm(target - np.array(spot)) <= best + 1e-12
+    assert min(np.linalg.norm(target - a) for a in anchors_) <= reach + 1e-9
+    if near:
+        best = min(np.linalg.norm(p - np.array(spot)) for p in near)
+        assert np.linalg.norm(target - np.array(spot)) <= best + 1e-9
 
 
 def test_heuristic_is_zero_exactly_when_the_goal_contacts_are_held():

@@ -8,11 +8,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import shapely
+import shapely.ops
 
 from ..scene import Scene, Surface
 from .goal import Goal
 
-GRID = 9  # candidate points per side of a surface's bounding box
 # [m] candidate points this far inside a surface, at most 90 % of its inradius: on a step or a
 # rung, its middle line (a target at the back edge of a stair step put Talos' toes against the
 # next riser and IPOPT found the touch infeasible)
@@ -48,22 +48,25 @@ class Region:
         c = self.polygon.centroid
         return self.surface.to_world(np.array([[c.x, c.y]]))[0]
 
-    def candidates(self) -> np.ndarray:
-        """(k, 3) world points on a grid inside the polygon, EDGE_MARGIN from its edges (at
-        most EDGE_SHARE of its inradius)."""
+    def inner(self) -> shapely.Polygon:
+        """The polygon shrunk by EDGE_MARGIN (at most EDGE_SHARE of its inradius)."""
         inradius = float(shapely.maximum_inscribed_circle(self.polygon).length)
         inner = self.polygon.buffer(-min(EDGE_MARGIN, EDGE_SHARE * inradius))
-        if inner.is_empty:
-            inner = self.polygon
-        x0, y0, x1, y1 = inner.bounds
-        xs, ys = np.meshgrid(np.linspace(x0, x1, GRID), np.linspace(y0, y1, GRID))
-        pts = np.column_stack([xs.ravel(), ys.ravel()])
-        keep = shapely.contains_xy(inner, pts[:, 0], pts[:, 1]) | shapely.intersects_xy(
-            inner, pts[:, 0], pts[:, 1]
-        )
-        c = inner.centroid
-        pts = np.vstack([pts[keep], [[c.x, c.y]]])
-        return self.surface.to_world(pts)
+        return self.polygon if inner.is_empty else inner
+
+    def within(self, anchors: list[np.ndarray], reach: float) -> shapely.Geometry:
+        """The part of ``inner`` within ``reach`` [m] of an anchor (3,) (the whole of it
+        without anchors), a polygon inscribed in the exact set."""
+        if not anchors:
+            return self.inner()
+        discs = []
+        for a in anchors:
+            x, y, z = self.to_local(a)
+            if abs(z) < reach:
+                discs.append(shapely.Point(x, y).buffer(float(np.sqrt(reach**2 - z**2)), 32))
+        if not discs:
+            return shapely.Polygon()
+        return self.inner().intersection(shapely.union_all(discs))
 
 
 def regions(scene: Scene) -> dict[str, Region]:
@@ -74,15 +77,15 @@ def regions(scene: Scene) -> dict[str, Region]:
 def pick_target(
     region: Region, spot: np.ndarray, anchors: list[np.ndarray], reach: float
 ) -> np.ndarray | None:
-    """The candidate point of ``region`` nearest the goal ``spot`` (3,) among those within
-    ``reach`` [m] of an anchor (a sole in contact); None when none is."""
-    pts = region.candidates()
-    if anchors:
-        d = np.min([np.linalg.norm(pts - a, axis=1) for a in anchors], axis=0)
-        pts = pts[d <= reach]
-    if len(pts) == 0:
+    """The point (3,) of ``region`` nearest the goal ``spot`` (3,) among those within
+    ``reach`` [m] of an anchor (a sole in contact) and EDGE_MARGIN inside; None when no point
+    is within reach."""
+    area = region.within(anchors, reach)
+    if area.is_empty:
         return None
-    return np.array(pts[int(np.argmin(np.linalg.norm(pts - spot, axis=1)))])
+    x, y, _ = region.to_local(spot)
+    near, _ = shapely.ops.nearest_points(area, shapely.Point(x, y))
+    return region.surface.to_world(np.array([[near.x, near.y]]))[0]
 
 
 def goal_spots(

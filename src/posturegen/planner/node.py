@@ -12,6 +12,20 @@ from ..problem import Problem
 from ..solve import Result
 
 Key = frozenset[tuple[str, str]]  # (robot patch, surface) of every contact of a stance
+# a stance with where each contact is, to CELL: the search holds each place once
+Place = frozenset[tuple[str, str, tuple[int, int, int]]]
+CELL = 0.1  # [m]
+
+
+def cell(p: np.ndarray) -> tuple[int, int, int]:
+    """The CELL-sized cube (indices) that holds a world point (3,) [m]."""
+    i, j, k = (int(v) for v in np.floor(np.asarray(p, dtype=float) / CELL))
+    return i, j, k
+
+
+def place_of(key: Key, positions: dict[str, np.ndarray]) -> Place:
+    """A stance's place: each contact's patch, surface and the cell of the patch."""
+    return frozenset((p, s, cell(positions[p])) for p, s in key)
 
 
 @dataclass(frozen=True)
@@ -32,6 +46,12 @@ class Action:
         """The stance after this transition."""
         pair = (self.patch, self.surface)
         return key | {pair} if self.kind == "add" else key - {pair}
+
+    def child_place(self, place: Place) -> Place:
+        """The place after this transition (an add's patch at its target's cell)."""
+        if self.kind == "add" and self.target is not None:
+            return place | {(self.patch, self.surface, cell(np.array(self.target)))}
+        return frozenset(x for x in place if x[0] != self.patch)
 
 
 @dataclass(frozen=True)
@@ -59,6 +79,11 @@ class Node:
     action: Action | None = None
     depth: int = 0
     extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def place(self) -> Place:
+        """The stance with the cell of each contact."""
+        return place_of(self.key, self.positions)
 
     @property
     def last(self) -> Stage:

@@ -2,8 +2,8 @@
 ref. [8]): the open list holds transitions not yet tried, ordered by their child's estimated
 f; each round pops as many as there are workers, solves their postures together
 (posturegen.planner.solver), and pushes the successors of the stances that held. A stance is
-closed once held MAX_HOLDS times (by different transitions: another placement on the same
-surfaces can lead on where the first did not); a transition that failed is never tried again,
+closed once held at a place (its contacts' surfaces and their positions to 10 cm: a foot
+placed further on the same ground is another place); a transition that failed is never tried again,
 and its problem is kept (``Stats.failed_problems``) for ``posturegen solve`` to diagnose."""
 
 from __future__ import annotations
@@ -25,12 +25,12 @@ from ..solve import Result
 from ..spec import problem_from_dict
 from .heuristic import STEP_COST, Heuristic
 from .layout import pick_target
-from .node import Action, Key, Node, Stage
+from .node import Action, Node, Place, Stage, cell, place_of
 from .rules import Rules, patch_positions
 from .solver import RoundSolver
 from .transitions import hold_stage, touch_stage, unload_stage
 
-MAX_HOLDS = 2  # postures kept per stance (set of patch-surface pairs)
+MAX_HOLDS = 1  # postures kept per place (stance and the cells of its contacts)
 
 
 @dataclass(frozen=True)
@@ -84,15 +84,15 @@ class Search:
         self.seq, self.heur, self.rules, self.solver = seq, heuristic, rules, solver
         self.budget, self.progress = budget, progress
         self.stats = Stats()
-        self.holds: dict[Key, int] = {}
-        self.failed: set[tuple[Key, Action]] = set()
-        self._open: list[tuple[float, int, Node, Action, Key]] = []
+        self.holds: dict[Place, int] = {}
+        self.failed: set[tuple[Place, Action]] = set()
+        self._open: list[tuple[float, int, Node, Action, Place]] = []
         self._count = itertools.count()
 
     def run(self, start: Node) -> tuple[Node, Stats]:
         """Search from the start stance until the goal, the budget, or an empty open list."""
         t0 = time.perf_counter()
-        self.holds[start.key] = 1
+        self.holds[start.place] = 1
         best = start
         self._push_successors(start)
         while True:
@@ -113,7 +113,7 @@ class Search:
         self.stats.postures = self.solver.solved
         return best, self.stats
 
-    def _closed(self, key: Key) -> bool:
+    def _closed(self, key: Place) -> bool:
         return self.holds.get(key, 0) >= MAX_HOLDS
 
     def _stop_reason(self) -> str:
@@ -128,11 +128,11 @@ class Search:
     def _pop_round(self) -> list[tuple[Node, Action]]:
         """Up to ``workers`` untried transitions to distinct new stances, best first."""
         out: list[tuple[Node, Action]] = []
-        keys: set[Key] = set()
+        keys: set[Place] = set()
         room = min(self.solver.workers, self.budget.nodes - self.stats.tried)
         while self._open and len(out) < room:
             _, _, node, action, child = heapq.heappop(self._open)
-            if self._closed(child) or child in keys or (node.key, action) in self.failed:
+            if self._closed(child) or child in keys or (node.place, action) in self.failed:
                 continue
             keys.add(child)
             out.append((node, action))
@@ -142,14 +142,15 @@ class Search:
         """Every allowed transition from the node, with its child's estimated f."""
         self.stats.expanded += 1
         for action in self._actions(node):
-            child = action.child_key(node.key)
+            child = action.child_place(node.place)
             if self._closed(child):
                 continue
             positions = dict(node.positions)
             if action.target is not None:
                 positions[action.patch] = np.array(action.target)
-            h = self.heur.h(child, positions, node.extra.get("frame"))
-            f = self.heur.f(node.g + STEP_COST, h, child)
+            key = action.child_key(node.key)
+            h = self.heur.h(key, positions, node.extra.get("frame"))
+            f = self.heur.f(node.g + STEP_COST, h, key)
             heapq.heappush(self._open, (f, next(self._count), node, action, child))
 
     def _actions(self, node: Node) -> list[Action]:
@@ -169,20 +170,21 @@ class Search:
                 continue
             rule = self.rules.patches[p]
             for s, region in self.heur.areas.items():
-                if not rule.allows(s) or self._undo(node, p, s):
+                if not rule.allows(s):
                     continue
-                anchors = [a for a in soles if a is not node.positions.get(p)]
-                target = pick_target(region, self.heur.spots[p], anchors, rule.reach)
-                if target is not None:
+                target = pick_target(region, self.heur.spots[p], soles, rule.reach)
+                if target is not None and not self._undo(node, p, s, target):
                     out.append(Action("add", p, s, tuple(float(v) for v in target)))
         return out
 
     @staticmethod
-    def _undo(node: Node, patch: str, surface: str) -> bool:
-        """The transition would undo the one that led to the node (the same patch and
-        surface): never useful."""
+    def _undo(node: Node, patch: str, surface: str, target: np.ndarray | None = None) -> bool:
+        """The transition would undo the one that led to the node: remove what it added, or
+        put back what it removed in the same cell."""
         a = node.action
-        return a is not None and (a.patch, a.surface) == (patch, surface)
+        if a is None or (a.patch, a.surface) != (patch, surface):
+            return False
+        return a.kind == "add" or target is None or cell(target) == cell(node.positions[patch])
 
     def _evaluate(self, round_: list[tuple[Node, Action]]) -> list[Node]:
         """Solve the round's transitions (touch or unload, then the holds): the new nodes."""
@@ -258,18 +260,18 @@ class Search:
         if not done:
             return None
         key = action.child_key(node.key)
-        if self._closed(key):
+        robot = done[-1].problem.robot
+        positions = patch_positions(robot, done[-1].result.q)
+        place = place_of(key, positions)
+        if self._closed(place):
             return None
-        self.holds[key] = self.holds.get(key, 0) + 1
+        self.holds[place] = self.holds.get(place, 0) + 1
         contacts = dict(node.contacts)
         if action.kind == "add":
             contacts[action.patch] = action.patch
         else:
             contacts.pop(action.patch)
-        robot = done[-1].problem.robot
-        q = done[-1].result.q
-        frame = frame_position(self.heur.goal.frame, q, robot)
-        positions = patch_positions(robot, q)
+        frame = frame_position(self.heur.goal.frame, done[-1].result.q, robot)
         g = node.g + STEP_COST
         child = Node(
             key,
@@ -289,7 +291,7 @@ class Search:
         return child
 
     def _fail(self, node: Node, action: Action, why: str) -> None:
-        self.failed.add((node.key, action))
+        self.failed.add((node.place, action))
         self.stats.failures.append(
             {"stance": node.describe(), "action": action.label(), "why": why}
         )
