@@ -104,6 +104,7 @@ def atlas_rules():
         ({"patches": {"left_sole": {"surfaces": []}}}, "rules.patches.left_sole.surfaces"),
         ({"max_contact": 3}, "rules.max_contact"),
         ({"min_contacts": 0}, "rules.min_contacts"),
+        ({"release": "drop"}, "rules.release"),
     ],
 )
 def test_rule_errors_name_their_field(atlas_rules, rules, field):

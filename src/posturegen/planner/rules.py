@@ -4,6 +4,7 @@ from the stance, the contact options of each patch, and the number of contacts.
 Format (YAML or a dict; every key optional, defaults per robot from :func:`default_rules`)::
 
     hands: false               # may the patches named *hand* be used
+    release: unload            # unload (the union checked) or lift (the new stance only)
     min_contacts: 1            # a stance holds at least this many contacts
     max_contacts: 4
     patches:
@@ -38,6 +39,7 @@ SOLE_CONTACT: dict[str, Any] = {
     "yaw_range": [-0.6, 0.6],
 }
 HAND_CONTACT: dict[str, Any] = {"min_radii": [0.015, 0.015]}
+RELEASES = ("unload", "lift")
 # the keys of a geometric contact that a rule may set (posturegen.spec)
 CONTACT_KEYS = ("min_radii", "min_area", "maximize_area", "yaw_range", "formulation", "scaling")
 
@@ -65,6 +67,9 @@ class Rules:
     hands: bool = False
     min_contacts: int = 1
     max_contacts: int = 4
+    # "unload": a removal's posture holds the union, the contact resting unloaded where it
+    # was; "lift": only the new stance, the patch free (what the scripted climbs check)
+    release: str = "unload"
 
     def movable(self) -> list[str]:
         """The patches the planner may place (hands only when allowed)."""
@@ -74,6 +79,7 @@ class Rules:
         """The rules in their input format."""
         return {
             "hands": self.hands,
+            "release": self.release,
             "min_contacts": self.min_contacts,
             "max_contacts": self.max_contacts,
             "patches": {
@@ -157,7 +163,10 @@ def parse_rules(value: Any, defaults: Rules) -> Rules:
     if value is None:
         return defaults
     v = F.require_mapping(value, "rules")
-    F.check_keys(v, "rules", [], ["hands", "min_contacts", "max_contacts", "patches"])
+    F.check_keys(v, "rules", [], ["hands", "release", "min_contacts", "max_contacts", "patches"])
+    release = v.get("release", defaults.release)
+    if release not in RELEASES:
+        raise InputError("rules.release", f"unknown release {release!r}", "use unload or lift")
     hands = v.get("hands", defaults.hands)
     if not isinstance(hands, bool):
         raise InputError(
@@ -178,7 +187,9 @@ def parse_rules(value: Any, defaults: Rules) -> Rules:
                 with_hint(str(name), known, f"use one of: {', '.join(known)}"),
             )
         patches[name] = _patch_rule(rule, f"rules.patches.{name}", defaults.patches[name])
-    return replace(defaults, patches=patches, hands=hands, min_contacts=lo, max_contacts=hi)
+    return replace(
+        defaults, patches=patches, hands=hands, min_contacts=lo, max_contacts=hi, release=release
+    )
 
 
 def patch_positions(robot: Robot, q: np.ndarray) -> dict[str, np.ndarray]:

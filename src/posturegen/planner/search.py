@@ -28,7 +28,7 @@ from .layout import pick_target
 from .node import Action, Node, Place, Stage, cell, place_of
 from .rules import Rules, patch_positions
 from .solver import RoundSolver
-from .transitions import hold_stage, touch_stage, unload_stage
+from .transitions import hold_stage, lift_stage, touch_stage, unload_stage
 
 MAX_HOLDS = 1  # postures kept per place (stance and the cells of its contacts)
 
@@ -218,7 +218,8 @@ class Search:
         cannot be built (said in the failures)."""
         try:
             if action.kind == "remove":
-                data = unload_stage(self.seq, node, action, self.heur.goal)
+                release = lift_stage if self.rules.release == "lift" else unload_stage
+                data = release(self.seq, node, action, self.heur.goal)
             elif touch is None:
                 data = touch_stage(self.seq, node, action, self.rules, self.heur.goal)
             else:

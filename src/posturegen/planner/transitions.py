@@ -116,6 +116,17 @@ def _fixed_yaw(problem: Problem, name: str) -> float:
     return float(getattr(contact, "yaw", 0.0))
 
 
+def lift_stage(seq: Mapping[str, Any], node: Node, action: Action, goal: Goal) -> dict[str, Any]:
+    """The problem dict of a removal under ``release: lift``: the other contacts alone, the
+    patch free (the union with it unloaded is not checked)."""
+    stage = {
+        "name": f"lift: {action.label()}",
+        "contacts": [_keep(n) for p, n in node.contacts.items() if p != action.patch],
+        "tasks": goal_tasks(goal),
+    }
+    return stage_problem_dict(dict(seq), stage, node.depth + 1, node.last.problem, node.q)
+
+
 def unload_stage(seq: Mapping[str, Any], node: Node, action: Action, goal: Goal) -> dict[str, Any]:
     """The problem dict of the unload posture of ``action`` (a remove) from ``node``."""
     problem = node.last.problem
