@@ -165,7 +165,8 @@ def test_picked_target_lies_on_the_surface_within_reach(r, anchors, spot, reach)
         assert np.linalg.norm(target - np.array(spot)) <= best + 1e-9
 
 
-def test_heuristic_is_zero_exactly_when_the_goal_contacts_are_held():
+def _steps_heuristic():
+    """Ground, step1, step2 (30 cm apart, 12 cm rise); goal: both soles on step2."""
     surfaces = {
         n: Surface(
             n,
@@ -177,7 +178,11 @@ def test_heuristic_is_zero_exactly_when_the_goal_contacts_are_held():
     areas = {n: Region.of(s) for n, s in surfaces.items()}
     goal = Goal(contacts=(("left_sole", "step2"), ("right_sole", "step2")))
     spots = {p: areas["step2"].centre() for p in PATCHES}
-    heur = Heuristic(goal, areas, spots, 2)
+    return Heuristic(goal, areas, spots, 2)
+
+
+def test_heuristic_is_zero_exactly_when_the_goal_contacts_are_held():
+    heur = _steps_heuristic()
     pos = {p: np.zeros(3) for p in PATCHES}
     start = frozenset({("left_sole", "ground"), ("right_sole", "ground")})
     top = frozenset({("left_sole", "step2"), ("right_sole", "step2")})
@@ -188,18 +193,7 @@ def test_heuristic_is_zero_exactly_when_the_goal_contacts_are_held():
 
 
 def _search_on_steps(rules):
-    surfaces = {
-        n: Surface(
-            n,
-            pin.SE3(np.eye(3), np.array([0.3 * k, 0, 0.12 * k])),
-            ConvexPolygon([[-0.1, -0.4], [0.1, -0.4], [0.1, 0.4], [-0.1, 0.4]]),
-        )
-        for k, n in enumerate(SURFACES)
-    }
-    areas = {n: Region.of(s) for n, s in surfaces.items()}
-    goal = Goal(contacts=(("left_sole", "step2"), ("right_sole", "step2")))
-    spots = {p: areas["step2"].centre() for p in PATCHES}
-    return Search({}, Heuristic(goal, areas, spots, 2), rules, RoundSolver(1), Budget())
+    return Search({}, _steps_heuristic(), rules, RoundSolver(1), Budget())
 
 
 @settings(max_examples=40, deadline=None)
