@@ -22,12 +22,15 @@ from .errors import (
 from .io.problem_file import load_problem, problem_from_dict
 from .model.robot import Robot, load_robot
 from .model.scene import Obstacle, Scene, Surface
+from .planner import PlanReport, plan
 from .solver.diagnose import diagnose
 from .solver.problem import Problem, SolverOptions
 from .solver.solve import Result, solve
 from .verify import VerifyReport, verify_posture
 
 __all__ = [
+    "PlanReport",
+    "plan",
     "BatchError",
     "ImplausibleValueWarning",
     "InputError",

@@ -1,4 +1,5 @@
-"""Command line: ``posturegen solve | batch | inspect | verify | demo | bench | render | view``.
+"""Command line: ``posturegen solve | batch | inspect | verify | demo | climb | plan | bench |
+render | view``.
 
 Exit codes: 0 verified success; 1 no posture found (the file is still written, success false);
 2 invalid input (one line on stderr naming the field and the fix).
@@ -27,6 +28,7 @@ from .climb.sequence import StageReport, run_sequence
 from .errors import PosturegenError, PosturegenWarning
 from .hints import with_hint
 from .io.problem_file import load_problem, read_yaml
+from .planner.command import add_parser as add_plan_parser
 from .solver.diagnose import solve_diagnosed
 from .solver.inspection import describe
 from .verify import verify_file
@@ -339,6 +341,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true")
     _add_png_option(p)
     p.set_defaults(func=cmd_climb)
+    add_plan_parser(sub)
     _add_bench_parser(sub)
     meshes = {"choices": ["visual", "collision"], "default": "visual", "help": "robot meshes"}
     p = sub.add_parser("render", help="draw a posture file to a PNG (paper-style figure)")

@@ -1,0 +1,228 @@
+"""The contact planner (posturegen.planner): a stairs plan found and verified, the goal and
+rules formats' one-line errors, the target picking and the heuristic's goal test."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from posturegen.model.robot import load_bundled
+from posturegen.model.scene import Surface
+
+from posturegen import plan
+from posturegen.cli import main
+from posturegen.errors import InputError
+from posturegen.geometry import ConvexPolygon
+from posturegen.planner import Budget, Goal, default_rules, parse_goal, parse_rules
+from posturegen.planner.heuristic import Heuristic
+from posturegen.planner.layout import Region, pick_target
+from posturegen.planner.node import Action, Node
+from posturegen.planner.rules import is_hand
+from posturegen.planner.search import Search
+from posturegen.planner.solver import RoundSolver
+from posturegen.verify import verify_posture
+
+PATCHES = ["left_sole", "right_sole", "left_hand", "right_hand"]
+SURFACES = ["ground", "step1", "step2"]
+FRAMES = ["base_link", "l_foot"]
+
+
+def test_stairs_plan_reaches_the_top_with_every_stage_verified(tmp_path):
+    """ATLAS, 2 steps, no stage list: both soles end on step 2, every posture re-checked."""
+    report = plan("stairs", tmp_path, robot="atlas", steps=2, budget=Budget(nodes=20))
+    assert report.success and report.stats.reached
+    index = json.loads((tmp_path / "sequence.json").read_text())
+    assert index["success"] and len(index["stages"]) >= 5
+    robot = load_bundled("atlas")
+    for stage in index["stages"]:
+        posture = json.loads((tmp_path / stage["posture"]).read_text())
+        assert stage["success"] and posture["self_collision"]
+        assert verify_posture(posture, robot.model).ok, stage["name"]
+    last = json.loads((tmp_path / index["stages"][-1]["posture"]).read_text())
+    held = {(c["robot_patch"]["name"], c["surface"]["name"]) for c in last["contacts"]}
+    assert {("left_sole", "step2"), ("right_sole", "step2")} <= held
+    summary = json.loads((tmp_path / "plan.json").read_text())
+    assert summary["reached"] and summary["postures_solved"] >= len(index["stages"])
+    assert summary["stances"][-1] == "left_sole@step2, right_sole@step2"
+
+
+@pytest.mark.parametrize(
+    "goal, field",
+    [
+        (
+            {"contacts": [{"robot_patch": "left_sole", "surface": "step9"}]},
+            "goal.contacts[0].surface",
+        ),
+        (
+            {"contacts": [{"robot_patch": "left_foot", "surface": "step1"}]},
+            "goal.contacts[0].robot_patch",
+        ),
+        ({"contacts": [{"robot_patch": "left_sole"}]}, "goal.contacts[0].surface"),
+        ({"contacts": []}, "goal.contacts"),
+        ({"frame": "base_link", "point": [1, 2]}, "goal.point"),
+        ({"frame": "base_lnk", "point": [1, 2, 3]}, "goal.frame"),
+        ({"frame": "base_link", "point": [1, 2, 3], "tolerance": -1}, "goal.tolerance"),
+        ({"point": [1, 2, 3]}, "goal"),
+        ([1, 2], "goal"),
+    ],
+)
+def test_goal_errors_name_their_field(goal, field):
+    with pytest.raises(InputError) as exc:
+        parse_goal(goal, PATCHES, SURFACES, FRAMES)
+    assert exc.value.field == field and "\n" not in str(exc.value)
+
+
+def test_goal_formats_round_trip():
+    g = parse_goal({"frame": "base_link", "point": [1, 0, 1.2]}, PATCHES, SURFACES, FRAMES)
+    assert g.frame == "base_link" and g.tolerance == 0.05
+    assert parse_goal(g.to_dict(), PATCHES, SURFACES, FRAMES) == g
+    c = {"contacts": [{"robot_patch": "left_sole", "surface": "step2"}]}
+    assert parse_goal(c, PATCHES, SURFACES, FRAMES).to_dict() == c
+
+
+@pytest.fixture(scope="module")
+def atlas_rules():
+    return default_rules(load_bundled("atlas"), SURFACES)
+
+
+@pytest.mark.parametrize(
+    "rules, field",
+    [
+        ({"patches": {"left_foot": {}}}, "rules.patches.left_foot"),
+        ({"min_contacts": 3, "max_contacts": 2}, "rules.max_contacts"),
+        ({"hands": "yes"}, "rules.hands"),
+        ({"patches": {"left_sole": {"reach": -0.2}}}, "rules.patches.left_sole.reach"),
+        (
+            {"patches": {"left_sole": {"contact": {"radii": [0.1]}}}},
+            "rules.patches.left_sole.contact.radii",
+        ),
+        ({"patches": {"left_sole": {"surfaces": []}}}, "rules.patches.left_sole.surfaces"),
+        ({"max_contact": 3}, "rules.max_contact"),
+        ({"min_contacts": 0}, "rules.min_contacts"),
+        ({"release": "drop"}, "rules.release"),
+    ],
+)
+def test_rule_errors_name_their_field(atlas_rules, rules, field):
+    with pytest.raises(InputError) as exc:
+        parse_rules(rules, atlas_rules)
+    assert exc.value.field == field and "\n" not in str(exc.value)
+
+
+def test_rules_override_the_defaults(atlas_rules):
+    r = parse_rules({"hands": True, "patches": {"left_hand": {"surfaces": ["step*"]}}}, atlas_rules)
+    assert r.hands and "left_hand" in r.movable()
+    assert r.patches["left_hand"].allows("step2") and not r.patches["left_hand"].allows("ground")
+    assert "left_hand" not in atlas_rules.movable()  # hands off by default
+
+
+def test_cli_bad_goal_is_one_line(tmp_path, capsys):
+    goal = json.dumps({"contacts": [{"robot_patch": "left_sole", "surface": "step9"}]})
+    code = main(["plan", "stairs", "--steps", "1", "--goal", goal, "--out", str(tmp_path)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "goal.contacts[0].surface" in err and "\n" not in err
+
+
+rect = st.tuples(
+    st.floats(0.02, 1.0), st.floats(0.02, 1.0), st.floats(-1, 1), st.floats(-1, 1), st.floats(0, 1)
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    rect,
+    st.lists(st.tuples(*[st.floats(-1.5, 1.5)] * 3), min_size=1, max_size=3),
+    st.tuples(*[st.floats(-2, 2)] * 3),
+    st.floats(0.05, 2.0),
+)
+def test_picked_target_lies_on_the_surface_within_reach(r, anchors, spot, reach):
+    """A target is inside the polygon, in its plane, within reach of an anchor, and no
+    point of a grid over the polygon within reach is nearer the spot (to the 32-gon's
+    0.5 % of the reach); None only when no grid point is within reach."""
+    sx, sy, x, y, z = r
+    v = [[-sx / 2, -sy / 2], [sx / 2, -sy / 2], [sx / 2, sy / 2], [-sx / 2, sy / 2]]
+    T = pin.SE3(pin.rpy.rpyToMatrix(0.3, -0.2, 0.5), np.array([x, y, z]))
+    region = Region.of(Surface("s", T, ConvexPolygon(v)))
+    anchors_ = [np.array(a) for a in anchors]
+    target = pick_target(region, np.array(spot), anchors_, reach)
+    inner = region.inner()
+    x0, y0, x1, y1 = inner.bounds
+    gx, gy = np.meshgrid(np.linspace(x0, x1, 15), np.linspace(y0, y1, 15))
+    grid = np.column_stack([gx.ravel(), gy.ravel()])
+    grid = region.surface.to_world(grid[shapely.contains_xy(inner, grid[:, 0], grid[:, 1])])
+    near = [p for p in grid if min(np.linalg.norm(p - a) for a in anchors_) <= 0.99 * reach]
+    if target is None:
+        assert not near
+        return
+    assert region.distance(target) < 1e-9
+    assert min(np.linalg.norm(target - a) for a in anchors_) <= reach + 1e-9
+    if near:
+        best = min(np.linalg.norm(p - np.array(spot)) for p in near)
+        assert np.linalg.norm(target - np.array(spot)) <= best + 1e-9
+
+
+def _steps_heuristic():
+    """Ground, step1, step2 (30 cm apart, 12 cm rise); goal: both soles on step2."""
+    surfaces = {
+        n: Surface(
+            n,
+            pin.SE3(np.eye(3), np.array([0.3 * k, 0, 0.12 * k])),
+            ConvexPolygon([[-0.1, -0.4], [0.1, -0.4], [0.1, 0.4], [-0.1, 0.4]]),
+        )
+        for k, n in enumerate(SURFACES)
+    }
+    areas = {n: Region.of(s) for n, s in surfaces.items()}
+    goal = Goal(contacts=(("left_sole", "step2"), ("right_sole", "step2")))
+    spots = {p: areas["step2"].centre() for p in PATCHES}
+    return Heuristic(goal, areas, spots, 2)
+
+
+def test_heuristic_is_zero_exactly_when_the_goal_contacts_are_held():
+    heur = _steps_heuristic()
+    pos = {p: np.zeros(3) for p in PATCHES}
+    start = frozenset({("left_sole", "ground"), ("right_sole", "ground")})
+    top = frozenset({("left_sole", "step2"), ("right_sole", "step2")})
+    half = frozenset({("left_sole", "step2"), ("right_sole", "ground")})
+    assert heur.h(top, pos, None) == 0.0 and heur.reached(top, None)
+    assert heur.h(start, pos, None) > heur.h(half, pos, None) > 0 and not heur.reached(half, None)
+    assert heur.f(0.0, 0.0, frozenset({("left_sole", "step2")})) > heur.f(0.0, 0.0, top)
+
+
+def _search_on_steps(rules):
+    return Search({}, _steps_heuristic(), rules, RoundSolver(1), Budget())
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.dictionaries(st.sampled_from(PATCHES[:2]), st.sampled_from(SURFACES), min_size=1),
+    st.sampled_from(["add", "remove"]),
+    st.floats(0.1, 1.0),
+)
+def test_successors_follow_the_rules_and_never_undo(on, kind, reach):
+    """Removes keep min_contacts; adds put a free sole on an allowed surface within reach
+    of a sole in contact; no successor undoes the transition that led to the node."""
+    rules = parse_rules(
+        {"patches": {p: {"reach": reach, "surfaces": ["ground", "step*"]} for p in PATCHES[:2]}},
+        default_rules(load_bundled("atlas"), SURFACES),
+    )
+    search = _search_on_steps(rules)
+    key = frozenset(on.items())
+    p0, s0 = sorted(on.items())[0]
+    last = Action(kind, p0, s0)
+    positions = {
+        p: np.array([0.3 * SURFACES.index(on.get(p, "ground")), 0.0, 0.0]) for p in PATCHES
+    }
+    node = Node(key, {p: p for p in on}, (), positions, action=last)
+    for a in search._actions(node):
+        assert (a.patch, a.surface) != (p0, s0)
+        if a.kind == "remove":
+            assert len(on) > rules.min_contacts and on[a.patch] == a.surface
+        else:
+            assert a.patch not in on and rules.patches[a.patch].allows(a.surface)
+            assert not is_hand(a.patch)
+            d = min(np.linalg.norm(np.array(a.target) - positions[p]) for p in on)
+            assert d <= reach + 1e-9
