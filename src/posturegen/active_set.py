@@ -24,8 +24,10 @@ from .collision import (
     excluded_joint_ids,
     proxy_model,
 )
+from .contacts import FixedContact
 from .kinematics import scratch_data
 from .proxies import ProxyModel, closest
+from .stance_hold import stance_caps
 
 # the closest sphere pairs of each pair of links, and spheres of each link near each box, that
 # enter the program in one round: proxies fitted to 1 cm put thousands of sphere pairs within
@@ -72,20 +74,23 @@ class ActiveSet:
     data: pin.Data
     self_pairs: set[tuple[int, int]] = field(default_factory=set)
     env_pairs: set[tuple[int, int]] = field(default_factory=set)
+    caps: np.ndarray | float = np.inf  # (P,) [m] holds' caps (stance_hold.stance_caps)
 
     @classmethod
     def of(cls, problem: Any) -> ActiveSet:
         """An empty active set for ``problem`` (its collision options set): its candidate
-        self pairs (those the pair rule leaves checked, minus the user's exclusions; none
-        without self-collision) and its boxes."""
+        self pairs (those the pair rule leaves checked, minus the user's exclusions and the
+        pairs that fixed contacts place, see :func:`placed_pairs`; none without
+        self-collision) and its boxes."""
         opts = problem.collision_options
         robot = problem.robot
         pm = proxy_model(robot)
         links = np.zeros(0, dtype=int)
         if opts.self_collision:
-            links = pm.links_of(frozenset(excluded_joint_ids(robot, opts)))
+            links = pm.links_of(frozenset(excluded_joint_ids(robot, opts)) | placed_pairs(problem))
         model = robot.model
-        return cls(pm, links, env_boxes(problem), opts, model, scratch_data(model))
+        caps = stance_caps(problem, pm) if len(links) else np.inf
+        return cls(pm, links, env_boxes(problem), opts, model, scratch_data(model), caps=caps)
 
     @property
     def n_env_candidates(self) -> int:
@@ -104,7 +109,7 @@ class ActiveSet:
         centers = self.pm.centers_world(self.model, self.data)
         out = Scan()
         if len(self.links):
-            clearance = self.pm.pair_clearance(margin)
+            clearance = np.minimum(self.pm.pair_clearance(margin), self.caps)
             close = self.pm.close_pairs(centers, clearance + self.options.activation, self.links)
             out.near_self = closest(close, SELF_PER_LINK).tuples()
             bad = close.take(close.d < violation_threshold(clearance[close.link]))
@@ -146,6 +151,17 @@ class ActiveSet:
         group = group[order]
         keep = order[np.arange(len(group)) - np.searchsorted(group, group) < ENV_PER_LINK]
         return {(int(i), int(k)) for i, k in zip(sphere[keep], box[keep], strict=True)}
+
+
+def placed_pairs(problem: Any) -> frozenset[tuple[int, int]]:
+    """Joint pairs (sorted ids) that both carry a fixed contact's patch: the contacts place
+    them, no variable moves one against the other, so a program row between them is a
+    constant. Such a row was infeasible whenever the stance put their proxies closer than the
+    margin (Talos, feet 16 cm apart at yaws 0.045 and 0.109 rad: soles' proxies 1 mm apart,
+    meshes apart; 12 of 12 reaches failed after 180-440 iterations). Their meshes are still
+    re-checked (posturegen.verify): a stance whose feet intersect fails there."""
+    joints = sorted({c.patch.joint_id for c in problem.contacts if isinstance(c, FixedContact)})
+    return frozenset((a, b) for i, a in enumerate(joints) for b in joints[i + 1 :])
 
 
 def box_label(box: EnvBox) -> str:

@@ -50,6 +50,7 @@ from .problem import BlockDerivatives, BuildContext, Problem, Term
 from .proxies import SLIDE, ProxyModel, closest, proxy_model
 from .proxy_fit import Sphere
 from .robot import Robot
+from .stance_hold import stance_caps
 
 __all__ = ["ProxyModel", "Sphere", "proxy_model"]
 
@@ -507,10 +508,12 @@ class CollisionTerm(Term):
             used = sorted({i for p in self.self_pairs for i in p})
             c = {i: _center(local, spheres[i]) for i in used}
             pm = self.pm
-            held = {}  # per joint pair: how far apart it is held (see _held)
-            for i, j in self.self_pairs:
-                k = pm.link_index(spheres[i].joint_id, spheres[j].joint_id)
-                held.setdefault(k, _held(margin, float(pm.clearance[k])))
+            links = self.held_links()
+            caps = nlp.parameter("collision.caps", len(links))  # stance_hold.stance_caps
+            held = {  # per joint pair: how far apart it is held (see _held)
+                k: ca.fmin(_held(margin, float(pm.clearance[k])), caps[n])
+                for n, k in enumerate(links)
+            }
             rows = [
                 [
                     _pair_element(
@@ -560,8 +563,15 @@ class CollisionTerm(Term):
         _GROUPS[key] = (self.pm, sorted(groups.items()))
         return _GROUPS[key][1]
 
+    def held_links(self) -> list[int]:
+        """The joint pairs (indices into ProxyModel.joint_pairs) of the self pairs, sorted."""
+        joint = self.pm.joint_ids
+        return sorted({self.pm.link_index(joint[i], joint[j]) for i, j in self.self_pairs})
+
     def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
         out = {"collision.margin": np.array([self.margin])}
+        if self.self_pairs:
+            out["collision.caps"] = stance_caps(problem, self.pm)[self.held_links()]
         if self.env_pairs:
             out["collision.boxes"] = np.column_stack(
                 [
