@@ -45,6 +45,10 @@ TOL_VIOLATION = 1e-6  # [m] a sphere-box pair this far below the margin is viola
 SELF_SLACK = 1e-3
 
 
+# near self pairs per (proxy model, posture, slack, links); the model is held: its id stays its own
+_NEAR: dict[tuple[Any, ...], tuple[ProxyModel, frozenset[tuple[int, int]]]] = {}
+
+
 def violation_threshold(clearance: np.ndarray) -> np.ndarray:
     """[m] the distance below which a self pair of clearance c is violated: c - SELF_SLACK,
     but not below 0 when c > 0 (proxies that were apart stay apart), c - 1e-6 when c <= 0."""
@@ -102,17 +106,17 @@ class ActiveSet:
         for k, box in enumerate(self.boxes):  # a sphere may touch the boxes of its contacts
             self.allowed[:, k] = ~np.isin(self.pm.joint_ids, sorted(box.allowed_joints))
 
-    def scan(self, q: np.ndarray, margin: float) -> Scan:
-        """The near pairs (the closest of each pair of links) and the violated pairs not yet
-        held (the closest of each pair of links) at posture q."""
+    def scan(self, q: np.ndarray, margin: float, near: bool = True) -> Scan:
+        """The violated pairs not yet held (the closest of each pair of links) at posture q,
+        and the near pairs (the closest of each pair of links): always with ``near``, else
+        only when a pair is violated (the loop ends at a posture without one; the near self
+        pairs within 5 cm are thousands, their search was 3/4 of a scan)."""
         pin.forwardKinematics(self.model, self.data, q)
         centers = self.pm.centers_world(self.model, self.data)
         out = Scan()
+        clearance = np.minimum(self.pm.pair_clearance(margin), self.caps)
         if len(self.links):
-            clearance = np.minimum(self.pm.pair_clearance(margin), self.caps)
-            close = self.pm.close_pairs(centers, clearance + self.options.activation, self.links)
-            out.near_self = closest(close, SELF_PER_LINK).tuples()
-            bad = close.take(close.d < violation_threshold(clearance[close.link]))
+            bad = self.pm.close_pairs(centers, violation_threshold(clearance), self.links)
             held = np.array(
                 [
                     (min(a, b), max(a, b)) in self.self_pairs
@@ -126,7 +130,22 @@ class ActiveSet:
             out.near_env = self._env(d_env, margin + self.options.environment_activation)
             fresh = np.where(self._held_env(), np.inf, d_env)
             out.violated_env = self._env(fresh, margin - TOL_VIOLATION)
+        if len(self.links) and (near or out.violated_self or out.violated_env):
+            out.near_self = self._near_self(q, centers, clearance + self.options.activation)
         return out
+
+    def _near_self(self, q: np.ndarray, centers: np.ndarray, slack: np.ndarray) -> set:
+        """The SELF_PER_LINK closest sphere pairs of each candidate pair of links closer than
+        ``slack`` (P,) [m] at q (centres (S, 3)); cached per posture: a planner's queries
+        start at the same one."""
+        key = (id(self.pm), q.tobytes(), slack.tobytes(), self.links.tobytes())
+        hit = _NEAR.get(key)
+        if hit is None or hit[0] is not self.pm:
+            if len(_NEAR) >= 64:
+                _NEAR.clear()
+            near = closest(self.pm.close_pairs(centers, slack, self.links), SELF_PER_LINK)
+            hit = _NEAR[key] = (self.pm, frozenset(near.tuples()))
+        return set(hit[1])
 
     def grow(self, scan: Scan) -> None:
         """Hold the scan's near and violated pairs too."""

@@ -346,7 +346,7 @@ class _Loop:
         or a run fails."""
         problem, active = self.problem, self.active
         for _round in range(max_rounds):
-            scan = active.scan(self.q_check, self.margin)
+            scan = active.scan(self.q_check, self.margin, near=not self.runs)
             if self.runs and not (scan.violated_self or scan.violated_env):
                 return  # no candidate outside the active set is violated
             active.grow(scan)
