@@ -19,6 +19,7 @@ import pinocchio as pin
 from shapely.geometry import MultiPoint, Point
 
 from .active_set import ActiveSet
+from .bench import _RIGHT_REACH
 from .problem import Problem
 from .robot import Robot, load_bundled
 from .spec import problem_from_dict
@@ -26,15 +27,7 @@ from .spec import problem_from_dict
 MARGIN = 0.005  # [m] self-collision margin of these families
 MU = 0.5
 BALANCE_MARGIN = 0.02  # [m] how far inside the feet's hull a sampled CoM must be
-# the torso and right-arm joints drawn for a target [rad]
-REACH_JOINTS = (
-    ("torso_1_joint", -0.5, 0.5),
-    ("torso_2_joint", -0.1, 0.5),
-    ("arm_right_1_joint", -1.2, 0.6),
-    ("arm_right_2_joint", -1.6, -0.1),
-    ("arm_right_3_joint", -1.0, 1.0),
-    ("arm_right_4_joint", -2.0, -0.1),
-)
+REACH_JOINTS = _RIGHT_REACH  # the torso and right-arm joints drawn for a target [rad]
 HAND = "gripper_right_base_link"
 GROUND = {"name": "ground", "vertices": [[-2, -2], [2, -2], [2, 2], [-2, 2]]}
 
