@@ -50,7 +50,7 @@ from .problem import BlockDerivatives, BuildContext, Problem, Term
 from .proxies import SLIDE, ProxyModel, closest, proxy_model
 from .proxy_fit import Sphere
 from .robot import Robot
-from .stance_hold import stance_caps
+from .stance_hold import held_clearance
 
 __all__ = ["ProxyModel", "Sphere", "proxy_model"]
 
@@ -509,11 +509,9 @@ class CollisionTerm(Term):
             c = {i: _center(local, spheres[i]) for i in used}
             pm = self.pm
             links = self.held_links()
-            caps = nlp.parameter("collision.caps", len(links))  # stance_hold.stance_caps
-            held = {  # per joint pair: how far apart it is held (see _held)
-                k: ca.fmin(_held(margin, float(pm.clearance[k])), caps[n])
-                for n, k in enumerate(links)
-            }
+            # per joint pair: how far apart it is held (stance_hold.held_clearance)
+            held_p = nlp.parameter("collision.held", len(links))
+            held = {k: held_p[n] for n, k in enumerate(links)}
             rows = [
                 [
                     _pair_element(
@@ -571,7 +569,7 @@ class CollisionTerm(Term):
     def parameters(self, problem: Problem) -> dict[str, np.ndarray]:
         out = {"collision.margin": np.array([self.margin])}
         if self.self_pairs:
-            out["collision.caps"] = stance_caps(problem, self.pm)[self.held_links()]
+            out["collision.held"] = held_clearance(problem, self.pm, self.margin)[self.held_links()]
         if self.env_pairs:
             out["collision.boxes"] = np.column_stack(
                 [

@@ -32,6 +32,8 @@ IK_TOL = 1e-6  # [m, rad] the patch error at which they stop
 IK_DAMPING = 1e-6
 # [m] a hold above this is no cap (how far apart proxies on chains ever need to be held)
 NO_CAP = 1.0
+DETERMINED = 6  # joints between the base and a fixed patch whose stance posture counts
+STANDS = 1e-4  # [m, rad] a stance posture whose patches are farther from their targets: no caps
 
 _CAPS: dict[tuple[Any, ...], np.ndarray] = {}  # per robot model, q_init and fixed targets
 
@@ -83,8 +85,20 @@ def stance_posture(robot: Robot, q: np.ndarray, fixed: Sequence[FixedContact]) -
 def stance_caps(problem: Any, pm: ProxyModel) -> np.ndarray:
     """(P,) [m] the largest hold of each candidate joint pair: for a pair of joints both on
     the chains to the fixed contacts, its proxies' distance in the stance posture (that
-    minus SLIDE when they overlap there, as at the reference); NO_CAP for the others."""
-    fixed = [c for c in problem.contacts if isinstance(c, FixedContact)]
+    minus SLIDE when they overlap there, as at the reference); NO_CAP for the others.
+
+    Only the chains that the contacts determine count: at most 6 joints between the base
+    and the patch (Talos' and HRP-2's legs); a longer chain (an arm and the torso holding a
+    rung) has postures to spare, and the one the least squares pick says nothing of how
+    close its links must come (capped there, ladder scenes failed the mesh check). No caps
+    either when the stance posture does not reach its targets (STANDS)."""
+    model = problem.robot.model
+    fixed = [
+        c
+        for c in problem.contacts
+        if isinstance(c, FixedContact)
+        and len(support_joints(model, [c.patch.joint_id])) - 1 <= DETERMINED
+    ]
     key = (
         id(problem.robot.model),
         np.asarray(problem.q_init, dtype=float).tobytes(),
@@ -99,10 +113,10 @@ def stance_caps(problem: Any, pm: ProxyModel) -> np.ndarray:
         [int(a) in chain and int(b) in chain for a, b in pm.joint_pairs], dtype=bool
     ).reshape(-1)
     links = np.flatnonzero(on_chain)
-    if fixed and len(links):
-        model = problem.robot.model
+    q = stance_posture(problem.robot, problem.q_init, fixed) if fixed and len(links) else None
+    if q is not None and _patch_error(model, q, fixed) < STANDS:
         data = model.createData()
-        pin.forwardKinematics(model, data, stance_posture(problem.robot, problem.q_init, fixed))
+        pin.forwardKinematics(model, data, q)
         centers = pm.centers_world(model, data)
         slack = np.maximum(pm.clearance, 0.0) + 1e-9  # only pairs closer than at the reference
         close = pm.close_pairs(centers, slack, links)
@@ -113,6 +127,22 @@ def stance_caps(problem: Any, pm: ProxyModel) -> np.ndarray:
         _CAPS.clear()
     _CAPS[key] = caps
     return caps
+
+
+def _patch_error(model: pin.Model, q: np.ndarray, fixed: Sequence[FixedContact]) -> float:
+    """The largest |log6| [m, rad] of a fixed patch's pose to its target at q."""
+    data = model.createData()
+    pin.forwardKinematics(model, data, q)
+    return max(
+        float(
+            np.abs(
+                pin.log6(
+                    (data.oMi[c.patch.joint_id] * c.patch.T_joint_patch).actInv(c.T_world_target)
+                ).vector
+            ).max()
+        )
+        for c in fixed
+    )
 
 
 def held_clearance(problem: Any, pm: ProxyModel, margin: float) -> np.ndarray:
