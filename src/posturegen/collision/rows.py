@@ -53,7 +53,6 @@ from ..terms.nlp import BlockDerivatives, BuildContext, Instance, Term
 from .boxes import BETA, EnvBox
 from .proxies import SLIDE, ProxyModel, closest, proxy_model
 from .proxy_fit import Sphere
-from .stance_hold import held_clearance
 
 __all__ = ["ProxyModel", "Sphere", "proxy_model"]
 
@@ -485,10 +484,10 @@ class CollisionTerm(Term):
             used = sorted({i for p in self.self_pairs for i in p})
             c = {i: _center(local, spheres[i]) for i in used}
             pm = self.pm
-            links = self.held_links()
-            # per joint pair: how far apart it is held (stance_hold.held_clearance)
-            held_p = nlp.parameter("collision.held", len(links))
-            held = {k: held_p[n] for n, k in enumerate(links)}
+            held = {}  # per joint pair: how far apart it is held (see _held)
+            for i, j in self.self_pairs:
+                k = pm.link_index(spheres[i].joint_id, spheres[j].joint_id)
+                held.setdefault(k, _held(margin, float(pm.clearance[k])))
             rows = [
                 [
                     _pair_element(
@@ -535,15 +534,8 @@ class CollisionTerm(Term):
             groups.setdefault((min(a, b), max(a, b)), []).append((i, j))
         return _GROUPS.put(key, sorted(groups.items()))
 
-    def held_links(self) -> list[int]:
-        """The joint pairs (indices into ProxyModel.joint_pairs) of the self pairs, sorted."""
-        joint = self.pm.joint_ids
-        return sorted({self.pm.link_index(joint[i], joint[j]) for i, j in self.self_pairs})
-
     def parameters(self, problem: Instance) -> dict[str, np.ndarray]:
         out = {"collision.margin": np.array([self.margin])}
-        if self.self_pairs:
-            out["collision.held"] = held_clearance(problem, self.pm, self.margin)[self.held_links()]
         if self.env_pairs:
             out["collision.boxes"] = np.column_stack(
                 [

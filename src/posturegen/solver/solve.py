@@ -188,13 +188,7 @@ def _map_collision_multipliers(lam: dict[str, Any], term: Any) -> dict[str, np.n
 _LEARNED: BoundedCache[tuple[frozenset[tuple[int, int]], frozenset[tuple[int, int]]]] = (
     BoundedCache("learned active sets", 64)
 )
-# up to 1000: Talos' first active set at half-sitting holds 427 sphere pairs (16 per pair of
-# links), so at 160 nothing was learned and every problem that needed a second round built
-# its own structure (1.2 s of CPU each). talos-reach-balance-collision (VM, CPU per call, 25
-# problems after 25): 99 ms at 160 (one build in 25 calls: 45 ms of it), 53 ms at 1000 (no
-# build; first pass 277 -> 138 ms); talos-stances-collision (20 after 20): 19 of 20 verified,
-# 55 mean iterations at 160; 20 of 20, 33 at 1000
-_LEARNED_MAX_PAIRS = 1000
+_LEARNED_MAX_PAIRS = 160
 # collision rows start close to active: a smaller initial barrier parameter took 32 instead
 # of 44 median iterations on talos-near-body-collision (n = 20, mu_init 1e-2 against IPOPT's
 # 0.1); with the separated start (collision.separated_start) 1e-3 took 22.5 and 21.0 (two
@@ -353,7 +347,7 @@ class _Loop:
         or a run fails."""
         active = self.active
         for _round in range(max_rounds):
-            scan = active.scan(self.q_check, self.margin, near=not self.runs)
+            scan = active.scan(self.q_check, self.margin)
             if self.runs and not (scan.violated_self or scan.violated_env):
                 return  # no candidate outside the active set is violated
             active.grow(scan)
