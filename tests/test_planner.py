@@ -11,13 +11,13 @@ import pytest
 import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from posturegen.model.robot import load_bundled
-from posturegen.model.scene import Surface
 
 from posturegen import plan
 from posturegen.cli import main
 from posturegen.errors import InputError
 from posturegen.geometry import ConvexPolygon
+from posturegen.model.robot import load_bundled
+from posturegen.model.scene import Surface
 from posturegen.planner import Budget, Goal, default_rules, parse_goal, parse_rules
 from posturegen.planner.heuristic import Heuristic
 from posturegen.planner.layout import Region, pick_target
