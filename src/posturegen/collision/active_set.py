@@ -20,6 +20,7 @@ import pinocchio as pin
 from ..model.kinematics import scratch_data
 from .boxes import CollisionOptions, EnvBox, env_boxes, excluded_joint_ids, row_box_distances
 from .proxies import ProxyModel, closest, proxy_model
+from .rows import CollisionTerm
 
 # the closest sphere pairs of each pair of links, and spheres of each link near each box, that
 # enter the program in one round: proxies fitted to 1 cm put thousands of sphere pairs within
@@ -116,6 +117,16 @@ class ActiveSet:
             fresh = np.where(self._held_env(), np.inf, d_env)
             out.violated_env = self._env(fresh, margin - TOL_VIOLATION)
         return out
+
+    def term(self, margin: float) -> CollisionTerm:
+        """The collision rows of the pairs held now, ``margin`` [m] apart."""
+        return CollisionTerm(
+            self.pm,
+            tuple(sorted(self.self_pairs)),
+            tuple(sorted(self.env_pairs)),
+            self.boxes,
+            margin,
+        )
 
     def grow(self, scan: Scan) -> None:
         """Hold the scan's near and violated pairs too."""

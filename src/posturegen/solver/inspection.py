@@ -20,14 +20,7 @@ def initial_collision_term(problem: Any) -> tuple[ActiveSet, CollisionTerm] | No
         return None
     active = ActiveSet.of(problem)
     active.grow(active.scan(problem.q_init, opts.margin))
-    term = CollisionTerm(
-        active.pm,
-        tuple(sorted(active.self_pairs)),
-        tuple(sorted(active.env_pairs)),
-        active.boxes,
-        opts.margin,
-    )
-    return active, term
+    return active, active.term(opts.margin)
 
 
 def describe(problem: Any) -> str:

@@ -351,13 +351,7 @@ class _Loop:
             if self.runs and not (scan.violated_self or scan.violated_env):
                 return  # no candidate outside the active set is violated
             active.grow(scan)
-            term = CollisionTerm(
-                active.pm,
-                tuple(sorted(active.self_pairs)),
-                tuple(sorted(active.env_pairs)),
-                active.boxes,
-                self.margin,
-            )
+            term = active.term(self.margin)
             run = self._run(term)
             if run.status not in _IPOPT_OK:
                 return
