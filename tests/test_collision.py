@@ -16,10 +16,10 @@ from hypothesis import strategies as st
 
 from posturegen import problem_from_dict, solve
 from posturegen.cli import _demo_dir
+from posturegen.collision.boxes import BETA
 from posturegen.collision.mesh_check import mesh_collision_checks
 from posturegen.collision.proxies import proxy_model
 from posturegen.collision.proxy_fit import EXCESS
-from posturegen.collision.rows import BETA
 from posturegen.collision.surface import refine, surface_of
 from posturegen.errors import InputError
 from posturegen.model.robot import load_robot
@@ -206,7 +206,8 @@ def test_distance_gradients_match_finite_differences():
 
 def test_hand_built_derivatives_match_casadi_and_finite_differences():
     """The program's Jacobian and Hessian of the Lagrangian, with the collision rows' own
-    derivatives (collision._soft_min_rows), against CasADi's automatic ones to 1e-9 and
+    derivatives (posturegen.collision.soft_min.soft_min_rows), against CasADi's automatic ones
+    to 1e-9 and
     against central differences, at seeded random x and multipliers."""
     data = copy.deepcopy(STAND)
     data["options"]["self_collision"] = True
@@ -387,7 +388,7 @@ def test_box_rows_are_conservative_exact_near_and_saturated_far(talos):
     from the box, r is within the LSE bound of d - m near the box, and r is the constant s
     (zero gradient) once the sphere is far."""
     from posturegen.collision.boxes import box_distances, row_box_distances
-    from posturegen.collision.rows import ENV_SATURATION
+    from posturegen.collision.soft_min import ENV_SATURATION
 
     data = copy.deepcopy(STAND)
     data["tasks"][0]["target"] = [0.45, -0.3, 0.75]
@@ -396,15 +397,16 @@ def test_box_rows_are_conservative_exact_near_and_saturated_far(talos):
     assert result.success, result.message
     term = problem.collision_term
     compiled = problem.compile()
-    rows = np.arange(compiled.n_g)[compiled.g_index["collision.env"]]
+    live = [k for k, pair in enumerate(term.env_rows()) if pair is not None]  # free slots out
+    rows = np.arange(compiled.n_g)[compiled.g_index["collision.env"]][live]
     x0, p, lbg, ubg = problem.numeric(compiled)
     xs = ca.SX.sym("x", x0.size)
     g = compiled.nlp(xs, p)[1][rows.tolist()]
     fn = ca.Function("rows", [xs], [g, ca.jacobian(g, xs)])
     bounds = {"lbx": compiled.lbx, "ubx": compiled.ubx, "lbg": lbg, "ubg": ubg}
     margin = term.margin
-    sphere = np.array([i for i, _ in term.env_pairs])
-    box = np.array([k for _, k in term.env_pairs])
+    sphere = np.array([term.env_rows()[k][0] for k in live])
+    box = np.array([term.env_rows()[k][1] for k in live])
     rng = np.random.default_rng(11)
     near = far = 0
     for x in [x0, compiled.solver(x0=x0, p=p, **bounds)["x"]] + [
@@ -541,7 +543,7 @@ def test_the_separated_start_parts_pressed_pairs_and_keeps_the_supports(talos):
     get apart (the sum of their shortfalls shrinks by a fifth), leaves the pairs that the
     reference posture already holds closer than the margin no closer, and the legs (they
     carry the feet) alone."""
-    from posturegen.collision.rows import SEPARATION, separated_start
+    from posturegen.collision.separation import SEPARATION, separated_start
 
     pm = proxy_model(talos)
     model = talos.model

@@ -1,30 +1,171 @@
-"""The names user code imported before the sub-packages still give the same objects."""
+"""Collision rows laid out in slots (posturegen.collision.rows.Layout): the spheres are
+parameters, so one compiled program serves every active set that fits its layout. The rows
+must be the held pairs' smooth minima whatever slot each pair lands in, free slots must change
+nothing, and a structure's later problems must reuse its solver."""
 
 from __future__ import annotations
 
+import copy
 import importlib
 
-import pytest
+import numpy as np
+import pinocchio as pin
+import yaml
 
-RE_EXPORTS = {
-    "posturegen.geometry": [
-        "posturegen.model.geometry",
-        "posturegen.model.ellipse_fit",
-        "posturegen.model.ellipse_rows",
-    ],
-    "posturegen.stance": ["posturegen.climb.stance"],
-    "posturegen.scenes": ["posturegen.climb.scenes"],
-    "posturegen.sequence": ["posturegen.climb.sequence"],
-    "posturegen.spec": ["posturegen.io.problem_file"],
-    "posturegen.inspection": ["posturegen.solver.inspection"],
-}
+from posturegen import problem_from_dict
+from posturegen.cli import _demo_dir
+from posturegen.collision.boxes import row_box_distances
+from posturegen.collision.rows import CollisionTerm, Layout
+from posturegen.collision.soft_min import ENV_SATURATION, SOFT_MIN_BETA
+from posturegen.collision.stance_hold import held_clearance
+from posturegen.solver.problem import Program
+from posturegen.solver.solve import configuration_from_x
+
+STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
+solve_module = importlib.import_module("posturegen.solver.solve")
 
 
-@pytest.mark.parametrize("old", sorted(RE_EXPORTS))
-def test_old_module_names_re_export_the_same_objects(old):
-    module = importlib.import_module(old)
-    homes = [importlib.import_module(m) for m in RE_EXPORTS[old]]
-    assert module.__all__
-    for name in module.__all__:
-        owners = [h for h in homes if getattr(h, name, None) is getattr(module, name)]
-        assert owners, f"{old}.{name} is not the object of {RE_EXPORTS[old]}"
+def _soft_min(v: np.ndarray, beta: float) -> float:
+    m = v.min()
+    return float(m - np.log(np.exp(-beta * (v - m)).sum()) / beta)
+
+
+def _problem(target, box=True):
+    data = copy.deepcopy(STAND)
+    data["tasks"][0]["target"] = target
+    data["options"]["self_collision"] = True
+    if box:
+        data["obstacles"] = [
+            {"name": "box", "box": [0.2, 0.2, 0.2], "position": [0.45, -0.3, 0.95]}
+        ]
+    return problem_from_dict(data)
+
+
+def _solved_program(problem):
+    """The program of the last IPOPT run of ``problem``'s solve (its collision rows held)."""
+    result, runs = solve_module._solve_continued(Program.of(problem), None, [])
+    assert result.success, result.message
+    return runs[-1].program
+
+
+def _numpy_rows(program, term, q):
+    """Each self row: softmin over its held pairs of |c_i - c_j| - r_i - r_j - held; each env
+    row: softmin(d_row, margin + ENV_SATURATION) - margin (NaN for free slots)."""
+    model = program.robot.model
+    data = model.createData()
+    pin.forwardKinematics(model, data, q)
+    pm = term.pm
+    centers = pm.centers_world(model, data)
+    held = held_clearance(program, pm, term.margin)
+    self_rows = []
+    for _, members in term.self_groups():
+        if not members:
+            self_rows.append(np.nan)
+            continue
+        pairs = np.array(members)
+        d = pm.distances(centers, pairs[:, 0], pairs[:, 1])
+        links = [pm.link_index(pm.joint_ids[i], pm.joint_ids[j]) for i, j in members]
+        self_rows.append(_soft_min(d - held[links], SOFT_MIN_BETA))
+    d_env = row_box_distances(pm, centers, term.boxes)
+    env_rows = [
+        np.nan
+        if pair is None
+        else _soft_min(np.array([d_env[pair], term.margin + ENV_SATURATION]), SOFT_MIN_BETA)
+        - term.margin
+        for pair in term.env_rows()
+    ]
+    return np.array(self_rows), np.array(env_rows)
+
+
+def _rows(program, x):
+    compiled = program.compile()
+    _, p, lbg, _ = program.numeric(compiled)
+    g = np.array(compiled.nlp(x, p)[1]).ravel()
+    return (
+        g[compiled.g_index["collision.self"]],
+        g[compiled.g_index["collision.env"]],
+        lbg[compiled.g_index["collision.self"]],
+        lbg[compiled.g_index["collision.env"]],
+    )
+
+
+def _wider(term: CollisionTerm, rng: np.random.Generator) -> Layout:
+    """``term``'s layout with more slots: a block more on some of its joint pairs, six candidate
+    joint pairs it does not hold, a link-box block it does not hold."""
+    pm = term.pm
+    held = {(a, b) for a, b, _ in term.layout.self_slots}
+    spare = [tuple(int(j) for j in pm.joint_pairs[k]) for k in range(len(pm.joint_pairs))]
+    spare = [p for p in spare if p not in held]
+    extra = [spare[k] for k in rng.choice(len(spare), 6, replace=False)]
+    more = tuple((a, b, n + 16) for a, b, n in term.layout.self_slots[::2])
+    env_joint = int(pm.joint_ids[0])
+    return term.layout.union(
+        Layout(more + tuple((a, b, 16) for a, b in extra), ((env_joint, 0, 8),))
+    )
+
+
+def test_rows_are_the_held_pairs_smooth_minima_in_any_layout():
+    """At seeded random postures the program's rows equal numpy's smooth minima of the held
+    pairs, in the layout the solve grew and in a wider one (free slots: rows unbounded, the
+    live rows the same to 1e-12)."""
+    problem = _problem([0.45, -0.3, 0.75])
+    program = _solved_program(problem)
+    term = program.collision_term
+    assert term.self_pairs and term.env_pairs
+    rng = np.random.default_rng(5)
+    wide_term = CollisionTerm(
+        term.pm, term.self_pairs, term.env_pairs, term.boxes, term.margin, _wider(term, rng)
+    )
+    wide = program.but(collision_term=wide_term)
+    assert wide_term.layout.size > term.layout.size
+    compiled = program.compile()
+    x_sol, _, _, _ = program.numeric(compiled)
+    for k in range(6):
+        x = x_sol + (0 if k == 0 else 0.2) * rng.normal(size=x_sol.size)
+        q = configuration_from_x(program, compiled, x)
+        for prog, t in ((program, term), (wide, wide_term)):
+            want_self, want_env = _numpy_rows(prog, t, q)
+            g_self, g_env, lb_self, lb_env = _rows(prog, x)
+            live_self, live_env = np.isfinite(want_self), np.isfinite(want_env)
+            np.testing.assert_allclose(g_self[live_self], want_self[live_self], atol=1e-9)
+            np.testing.assert_allclose(g_env[live_env], want_env[live_env], atol=1e-9)
+            assert np.all(lb_self[live_self] == 0) and np.all(lb_self[~live_self] == -np.inf)
+            assert np.all(lb_env[live_env] == 0) and np.all(lb_env[~live_env] == -np.inf)
+        assert (~np.isfinite(_numpy_rows(wide, wide_term, q)[0])).sum() > 0  # free rows seen
+
+
+def test_free_slots_change_no_posture():
+    """The same program solved in its own layout and in a wider one: the same posture."""
+    problem = _problem([0.45, -0.3, 0.75])
+    program = _solved_program(problem)
+    term = program.collision_term
+    wide_term = CollisionTerm(
+        term.pm,
+        term.self_pairs,
+        term.env_pairs,
+        term.boxes,
+        term.margin,
+        _wider(term, np.random.default_rng(6)),
+    )
+    narrow = solve_module._run_ipopt(program, None)
+    wide = solve_module._run_ipopt(program.but(collision_term=wide_term), None)
+    assert narrow.status == wide.status == "Solve_Succeeded"
+    q_narrow = configuration_from_x(program, narrow.compiled, narrow.x)
+    q_wide = configuration_from_x(program, wide.compiled, wide.x)
+    np.testing.assert_allclose(q_wide, q_narrow, atol=1e-7)
+    assert abs(wide.iterations - narrow.iterations) <= 1
+
+
+def test_a_structures_later_problems_reuse_its_solver(monkeypatch):
+    """Reaches of one structure, solved in turn: the learned layout grows to hold their pairs
+    and then serves them all (a planner's queries stop paying rebuilds), every posture
+    verified."""
+    monkeypatch.setattr(solve_module, "_LAYOUTS", type(solve_module._LAYOUTS)("test", 8))
+    targets = [[0.3, -0.3, 0.8], [0.2, -0.1, 0.9], [0.35, -0.4, 0.7], [0.15, -0.2, 1.0]]
+    problems = [_problem(t, box=False) for t in targets]
+    builds = []
+    for _ in range(3):
+        results = [solve_module.solve(p) for p in problems]
+        assert all(r.success for r in results), [r.message for r in results]
+        builds.append(sum(r.build_time_s > 0 for r in results))
+    assert builds[0] > 0 and builds[-1] == 0, builds

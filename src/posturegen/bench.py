@@ -49,6 +49,7 @@ class FamilyReport:
     c_builds: int = 0
     c_build_s: float = 0.0
     c_solves: int = 0
+    p90_call_ms: float = float("nan")  # 90th percentile of the whole call
 
     def line(self) -> str:
         """One human-readable line."""
@@ -56,6 +57,7 @@ class FamilyReport:
             f"{self.family:<24} n={self.n:<4} success={100 * self.success_rate:5.1f}%  "
             f"solve median={self.median_solve_ms:6.1f} ms  min={self.min_solve_ms:6.1f}  "
             f"max={self.max_solve_ms:7.1f}  call median={self.median_call_ms:6.1f} ms  "
+            f"p90={self.p90_call_ms:6.1f}  "
             f"iterations median={self.median_iterations:.0f}  "
             f"vars={self.variables} rows={self.constraints} contact rows={self.contact_rows}"
         )
@@ -398,6 +400,7 @@ class _FamilyRun:
             min_solve_ms=min(ms),
             max_solve_ms=max(ms),
             median_call_ms=1e3 * statistics.median(self.calls),
+            p90_call_ms=1e3 * float(np.percentile(self.calls, 90)),
             median_iterations=statistics.median(self.iters),
             variables=compiled.n_x,
             constraints=int(statistics.median(self.rows)),

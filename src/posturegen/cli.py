@@ -23,6 +23,9 @@ from .batch.bench import DEFAULT_FAMILY, ScalingRow, batch_scaling, machine_line
 from .batch.command import batch_to_dir
 from .batch.sources import read_sources
 from .bench import FAMILIES, FamilyReport, comparison_lines, run_families
+from .bench_planner import PlannerReport, run_planner_family
+from .bench_reach import PLANNER_FAMILIES
+from .bench_table import results_table, write_markdown
 from .climb.scenes import SCENES, scene
 from .climb.sequence import StageReport, run_sequence
 from .errors import PosturegenError, PosturegenWarning
@@ -231,27 +234,38 @@ def _add_png_option(p: argparse.ArgumentParser) -> None:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    """posturegen bench [--json FILE] | posturegen bench --batch"""
-    names = args.family or list(FAMILIES)
+    """posturegen bench [--json FILE] [--markdown FILE] | posturegen bench --batch"""
+    known = {**FAMILIES, **PLANNER_FAMILIES}
+    names = args.family or list(known)
     for name in names:
-        if name not in FAMILIES:
-            hint = with_hint(name, FAMILIES, f"known: {', '.join(FAMILIES)}")
+        if name not in known:
+            hint = with_hint(name, known, f"known: {', '.join(known)}")
             raise PosturegenError(f"--family: unknown family '{name}' ({hint})")
     if args.batch:
         return _bench_batch(args)
     args.n = 100 if args.n is None else args.n
+    before = machine_line()
 
-    def show(rep: FamilyReport) -> None:
+    def show(rep: FamilyReport | PlannerReport) -> None:
         print(rep.line(), flush=True)
-        for failure in rep.failures[:5]:
+        failures = rep.failures if isinstance(rep, FamilyReport) else rep.first.failures
+        for failure in failures[:5]:
             print(f"    failed {failure}")
 
-    reports = run_families(names, args.n, args.seed, args.jit, done=show)
+    classic = [name for name in names if name in FAMILIES]
+    reports = run_families(classic, args.n, args.seed, args.jit, done=show)
     for line in comparison_lines(reports):
         print(line)
+    planner = []
+    for name in (name for name in names if name in PLANNER_FAMILIES):
+        planner.append(run_planner_family(name, args.n, args.seed, args.jit))
+        show(planner[-1])
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps([asdict(r) for r in reports], indent=1))
+        Path(args.json).write_text(json.dumps([asdict(r) for r in reports + planner], indent=1))
+    if args.markdown:
+        machine = f"{before} (after: load {machine_line().rsplit('load average ', 1)[1]})"
+        write_markdown(args.markdown, results_table(machine, args.jit, reports, planner))
     return EXIT_OK
 
 
@@ -260,6 +274,8 @@ def _bench_batch(args: argparse.Namespace) -> int:
     if args.family and len(args.family) > 1:
         raise PosturegenError("--family: --batch runs one family (give --family once)")
     family = args.family[0] if args.family else DEFAULT_FAMILY
+    if family not in FAMILIES:
+        raise PosturegenError(f"--family: --batch runs a family of {', '.join(FAMILIES)}")
     n = 500 if args.n is None else args.n
     ray = importlib.util.find_spec("ray") is not None
     print(f"batch scaling, {family}, {n} problems, seed {args.seed}: {machine_line()}")
@@ -273,6 +289,9 @@ def _bench_batch(args: argparse.Namespace) -> int:
     for line in table(rows):
         print(line)
     print(f"after: {machine_line()}")
+    if args.markdown:
+        head = f"{family}, {n} problems, seed {args.seed}: {machine_line()}"
+        write_markdown(args.markdown, [head, "", *table(rows)], "bench-batch")
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps([asdict(r) for r in rows], indent=1))
@@ -293,6 +312,12 @@ def _add_batch_parser(sub: argparse._SubParsersAction) -> None:
 def _add_bench_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="run the seeded benchmark families")
     p.add_argument("--json", help="also write the reports to this JSON file")
+    p.add_argument(
+        "--markdown",
+        metavar="FILE",
+        help="also write the results table to FILE (between its <!-- bench:start --> and "
+        "<!-- bench:end --> lines if it has them; bench-batch for --batch)",
+    )
     p.add_argument("--family", action="append", help="run only this family (repeatable)")
     p.add_argument(
         "-n", type=int, help="problems per family (default 100; --batch: 500 in each row)"

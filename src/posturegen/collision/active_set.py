@@ -17,10 +17,13 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from .._cache import BoundedCache, Ref
 from ..model.kinematics import scratch_data
+from ..terms.contacts import FixedContact
 from .boxes import CollisionOptions, EnvBox, env_boxes, excluded_joint_ids, row_box_distances
 from .proxies import ProxyModel, closest, proxy_model
-from .rows import CollisionTerm
+from .rows import CollisionTerm, Layout
+from .stance_hold import stance_caps
 
 # the closest sphere pairs of each pair of links, and spheres of each link near each box, that
 # enter the program in one round: proxies fitted to 1 cm put thousands of sphere pairs within
@@ -36,6 +39,10 @@ TOL_VIOLATION = 1e-6  # [m] a sphere-box pair this far below the margin is viola
 # smooth minimum over the many sphere pairs of two links facing each other holds the closest
 # few, the others dip a little below (Talos' stand-reach: 5 rounds instead of 3 at 1e-6)
 SELF_SLACK = 1e-3
+
+
+# near self pairs per (proxy model, posture, slack, links): a planner's queries start at one posture
+_NEAR: BoundedCache[frozenset[tuple[int, int]]] = BoundedCache("near self pairs", 64)
 
 
 def violation_threshold(clearance: np.ndarray) -> np.ndarray:
@@ -67,20 +74,25 @@ class ActiveSet:
     data: pin.Data
     self_pairs: set[tuple[int, int]] = field(default_factory=set)
     env_pairs: set[tuple[int, int]] = field(default_factory=set)
+    caps: np.ndarray | float = np.inf  # (P,) [m] holds' caps (stance_hold.stance_caps)
+    # the slots of the rows (rows.Layout): grows with the pairs held, never shrinks
+    layout: Layout = field(default_factory=Layout)
 
     @classmethod
     def of(cls, problem: Any) -> ActiveSet:
         """An empty active set for ``problem`` (its collision options set): its candidate
-        self pairs (those the pair rule leaves checked, minus the user's exclusions; none
-        without self-collision) and its boxes."""
+        self pairs (those the pair rule leaves checked, minus the user's exclusions and the
+        pairs that fixed contacts place, see :func:`placed_pairs`; none without
+        self-collision) and its boxes."""
         opts = problem.collision_options
         robot = problem.robot
         pm = proxy_model(robot)
         links = np.zeros(0, dtype=int)
         if opts.self_collision:
-            links = pm.links_of(frozenset(excluded_joint_ids(robot, opts)))
+            links = pm.links_of(frozenset(excluded_joint_ids(robot, opts)) | placed_pairs(problem))
         model = robot.model
-        return cls(pm, links, env_boxes(problem), opts, model, scratch_data(model))
+        caps = stance_caps(problem, pm) if len(links) else np.inf
+        return cls(pm, links, env_boxes(problem), opts, model, scratch_data(model), caps=caps)
 
     @property
     def n_env_candidates(self) -> int:
@@ -92,17 +104,17 @@ class ActiveSet:
         for k, box in enumerate(self.boxes):  # a sphere may touch the boxes of its contacts
             self.allowed[:, k] = ~np.isin(self.pm.joint_ids, sorted(box.allowed_joints))
 
-    def scan(self, q: np.ndarray, margin: float) -> Scan:
-        """The near pairs (the closest of each pair of links) and the violated pairs not yet
-        held (the closest of each pair of links) at posture q."""
+    def scan(self, q: np.ndarray, margin: float, near: bool = True) -> Scan:
+        """The violated pairs not yet held (the closest of each pair of links) at posture q,
+        and the near pairs (the closest of each pair of links): always with ``near``, else
+        only when a pair is violated (the loop ends at a posture without one; the near self
+        pairs within 5 cm are thousands, their search was 3/4 of a scan)."""
         pin.forwardKinematics(self.model, self.data, q)
         centers = self.pm.centers_world(self.model, self.data)
         out = Scan()
+        clearance = np.minimum(self.pm.pair_clearance(margin), self.caps)
         if len(self.links):
-            clearance = self.pm.pair_clearance(margin)
-            close = self.pm.close_pairs(centers, clearance + self.options.activation, self.links)
-            out.near_self = closest(close, SELF_PER_LINK).tuples()
-            bad = close.take(close.d < violation_threshold(clearance[close.link]))
+            bad = self.pm.close_pairs(centers, violation_threshold(clearance), self.links)
             held = np.array(
                 [
                     (min(a, b), max(a, b)) in self.self_pairs
@@ -116,17 +128,35 @@ class ActiveSet:
             out.near_env = self._env(d_env, margin + self.options.environment_activation)
             fresh = np.where(self._held_env(), np.inf, d_env)
             out.violated_env = self._env(fresh, margin - TOL_VIOLATION)
+        if len(self.links) and (near or out.violated_self or out.violated_env):
+            out.near_self = self._near_self(q, centers, clearance + self.options.activation)
         return out
 
     def term(self, margin: float) -> CollisionTerm:
-        """The collision rows of the pairs held now, ``margin`` [m] apart."""
-        return CollisionTerm(
+        """The collision rows of the pairs held now, ``margin`` [m] apart, in the slots of
+        ``layout`` (grown to hold them)."""
+        term = CollisionTerm(
             self.pm,
             tuple(sorted(self.self_pairs)),
             tuple(sorted(self.env_pairs)),
             self.boxes,
             margin,
+            self.layout,
         )
+        self.layout = term.layout
+        return term
+
+    def _near_self(self, q: np.ndarray, centers: np.ndarray, slack: np.ndarray) -> set:
+        """The SELF_PER_LINK closest sphere pairs of each candidate pair of links closer than
+        ``slack`` (P,) [m] at q (centres (S, 3)); cached per posture: a planner's queries
+        start at the same one."""
+        key = (Ref(self.pm), q.tobytes(), slack.tobytes(), self.links.tobytes())
+
+        def make() -> frozenset[tuple[int, int]]:
+            near = closest(self.pm.close_pairs(centers, slack, self.links), SELF_PER_LINK)
+            return frozenset(near.tuples())
+
+        return set(_NEAR.get_or_make(key, make))
 
     def grow(self, scan: Scan) -> None:
         """Hold the scan's near and violated pairs too."""
@@ -151,6 +181,17 @@ class ActiveSet:
         group = group[order]
         keep = order[np.arange(len(group)) - np.searchsorted(group, group) < ENV_PER_LINK]
         return {(int(i), int(k)) for i, k in zip(sphere[keep], box[keep], strict=True)}
+
+
+def placed_pairs(problem: Any) -> frozenset[tuple[int, int]]:
+    """Joint pairs (sorted ids) that both carry a fixed contact's patch: the contacts place
+    them, no variable moves one against the other, so a program row between them is a
+    constant. Such a row was infeasible whenever the stance put their proxies closer than the
+    margin (Talos, feet 16 cm apart at yaws 0.045 and 0.109 rad: soles' proxies 1 mm apart,
+    meshes apart; 12 of 12 reaches failed after 180-440 iterations). Their meshes are still
+    re-checked (posturegen.verify): a stance whose feet intersect fails there."""
+    joints = sorted({c.patch.joint_id for c in problem.contacts if isinstance(c, FixedContact)})
+    return frozenset((a, b) for i, a in enumerate(joints) for b in joints[i + 1 :])
 
 
 def box_label(box: EnvBox) -> str:

@@ -119,7 +119,7 @@ def box_distances(pm: ProxyModel, centers: np.ndarray, boxes: list[EnvBox]) -> n
 
 def row_box_distances(pm: ProxyModel, centers: np.ndarray, boxes: list[EnvBox]) -> np.ndarray:
     """(S, B) the sphere-box rows' own distances [m]: LSE_β(s) - log(6)/β - r over the six
-    face distances s (:func:`posturegen.collision.rows._box_element`), up to log(6)/β below
+    face distances s (:func:`posturegen.collision.soft_min.box_element`), up to log(6)/β below
     :func:`box_distances`. The active set compares these with the margin, so a pair left out
     of the rows is never one whose row would be violated (a foot fixed by the next stance
     where its row read 1.4 mm under the margin, though 3.6 mm clear by the faces' maximum,

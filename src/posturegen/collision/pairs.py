@@ -157,6 +157,11 @@ def _overlapping(
     return out
 
 
+# unchecked_entries per (model, geometry, rule, user pairs): every posture of a robot lists
+# the same (Talos: 3 ms of each whole call); the objects are held, their ids stay their own
+_UNCHECKED: dict[tuple[Any, ...], tuple[Any, list[dict[str, Any]]]] = {}
+
+
 def unchecked_entries(
     model: pin.Model,
     geometry: pin.GeometryModel,
@@ -164,7 +169,24 @@ def unchecked_entries(
     user: frozenset[tuple[int, int]] = frozenset(),
 ) -> list[dict[str, Any]]:
     """The posture file's ``collision.unchecked``: every unchecked pair of joints that carry
-    geometry, ``{"pair": [joint, joint], "reason": ...}``, sorted by reason then names."""
+    geometry, ``{"pair": [joint, joint], "reason": ...}``, sorted by reason then names (a
+    fresh copy of the entries listed once per robot and user pairs)."""
+    key = (id(model), id(geometry), id(rule), user)
+    hit = _UNCHECKED.get(key)
+    if hit is None or any(a is not b for a, b in zip(hit[0], (model, geometry, rule), strict=True)):
+        if len(_UNCHECKED) >= 16:
+            _UNCHECKED.clear()
+        hit = _UNCHECKED[key] = ((model, geometry, rule), _unchecked(model, geometry, rule, user))
+    return [{"pair": list(e["pair"]), "reason": e["reason"]} for e in hit[1]]
+
+
+def _unchecked(
+    model: pin.Model,
+    geometry: pin.GeometryModel,
+    rule: PairRule,
+    user: frozenset[tuple[int, int]],
+) -> list[dict[str, Any]]:
+    """:func:`unchecked_entries`, listed."""
     carrying = sorted({int(o.parentJoint) for o in geometry.geometryObjects})
     out = []
     for i, a in enumerate(carrying):

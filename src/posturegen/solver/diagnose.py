@@ -436,7 +436,7 @@ def _collision_causes(r: Relaxed) -> Iterator[Cause]:
         pin.forwardKinematics(model, data, r.q)
         centers = pm.centers_world(model, data)
         for k, (_, members) in enumerate(term.self_groups()):
-            if s[k] > TOL_LENGTH:
+            if members and s[k] > TOL_LENGTH:
                 pairs = np.array(members, dtype=int)
                 i, j = pairs[int(np.argmin(pm.distances(centers, pairs[:, 0], pairs[:, 1])))]
                 who = f"the proxies of {_link(model, pm, i)} and {_link(model, pm, j)}"
@@ -445,12 +445,17 @@ def _collision_causes(r: Relaxed) -> Iterator[Cause]:
     s = r.slacks.get("collision.env")
     if s is None:
         return
+    env_rows = term.env_rows()
     for b, box in enumerate(term.boxes):
-        rows = [k for k, (_, bk) in enumerate(term.env_pairs) if bk == b and s[k] > TOL_LENGTH]
+        rows = [
+            k
+            for k, pair in enumerate(env_rows)
+            if pair is not None and pair[1] == b and s[k] > TOL_LENGTH
+        ]
         if not rows:
             continue
         rows.sort(key=lambda k: -s[k])
-        links = list(dict.fromkeys(_link(model, pm, term.env_pairs[k][0]) for k in rows))
+        links = list(dict.fromkeys(_link(model, pm, env_rows[k][0]) for k in rows))
         who = "the proxies of " + ", ".join(links[:3])
         more = len(links) - 3
         who += f" (and {more} more link{'s' if more > 1 else ''})" if more > 0 else ""

@@ -17,10 +17,8 @@ import pinocchio as pin
 
 from .._cache import BoundedCache
 from ..collision.active_set import ActiveSet
-from ..collision.rows import (
-    CollisionTerm,
-    separated_start,
-)
+from ..collision.rows import CollisionTerm, Layout
+from ..collision.separation import separated_start
 from ..io.posture_file import add_solve_fields, posture_dict, write_posture
 from ..verify import VerifyReport, verify_posture
 from .compile import CompiledNLP, is_compiled
@@ -166,7 +164,8 @@ def _block_multipliers(run: _Run, term: Any) -> dict[str, np.ndarray]:
             keys = [k for k, _ in term.self_groups()]
             out["collision.self"] = dict(zip(keys, out["collision.self"], strict=True))
         if "collision.env" in out:
-            out["collision.env"] = dict(zip(term.env_pairs, out["collision.env"], strict=True))
+            rows = zip(term.env_rows(), out["collision.env"], strict=True)
+            out["collision.env"] = {pair: lam for pair, lam in rows if pair is not None}
     return out
 
 
@@ -174,11 +173,11 @@ def _map_collision_multipliers(lam: dict[str, Any], term: Any) -> dict[str, np.n
     """Multipliers for the new active set: old pairs keep theirs, new pairs start at 0."""
     out = {k: v for k, v in lam.items() if isinstance(v, np.ndarray)}
     groups = [k for k, _ in term.self_groups()]
-    for block, pairs in (("collision.self", groups), ("collision.env", term.env_pairs)):
+    for block, pairs in (("collision.self", groups), ("collision.env", term.env_rows())):
         old = lam.get(block)
         if pairs:
             old = old if isinstance(old, dict) else {}
-            out[block] = np.array([old.get(p, 0.0) for p in pairs])
+            out[block] = np.array([0.0 if p is None else old.get(p, 0.0) for p in pairs])
     return out
 
 
@@ -188,7 +187,17 @@ def _map_collision_multipliers(lam: dict[str, Any], term: Any) -> dict[str, np.n
 _LEARNED: BoundedCache[tuple[frozenset[tuple[int, int]], frozenset[tuple[int, int]]]] = (
     BoundedCache("learned active sets", 64)
 )
+# Learned pairs start the next problem's active set: up to 160 of them. Up to 1000 (Talos'
+# first active set at half-sitting holds 427 sphere pairs), HRP-2's vertical ladder failed at
+# 'left foot on rung 2' (infeasible): rows learned from the earlier stages and from the
+# solve's own continuations held it where it could not move.
 _LEARNED_MAX_PAIRS = 160
+# The layouts (rows.Layout: slots per joint pair and per link and box) of a structure's
+# solves, united: the next problem's rows fit in it and its solver is the compiled one; rows
+# of free slots only are unbounded, so a larger layout changes no posture. Before (each new
+# active set its own structure, 1.2 s of CPU to build on Talos):
+_LEARNED_MAX_SLOTS = 4000
+_LAYOUTS: BoundedCache[Layout] = BoundedCache("collision layouts", 64)
 # collision rows start close to active: a smaller initial barrier parameter took 32 instead
 # of 44 median iterations on talos-near-body-collision (n = 20, mu_init 1e-2 against IPOPT's
 # 0.1); with the separated start (collision.separated_start) 1e-3 took 22.5 and 21.0 (two
@@ -294,6 +303,7 @@ def _solve_avoiding(
     base_key = (program.key(), len(active.boxes), opts.self_collision, opts.exclude)
     learned_self, learned_env = _LEARNED.get(base_key, (frozenset(), frozenset()))
     active.self_pairs, active.env_pairs = set(learned_self), set(learned_env)
+    active.layout = _LAYOUTS.get(base_key, Layout())
     run_options = _collision_solver_options(program.solver_options)
     loop = _Loop(program.but(solver_options=run_options), active, run_options, x0, joints0, layout)
     result: Result | None = None
@@ -301,6 +311,8 @@ def _solve_avoiding(
         loop.rounds(opts.max_rounds)
         if len(active.self_pairs) + len(active.env_pairs) <= _LEARNED_MAX_PAIRS:
             _LEARNED.put(base_key, (frozenset(active.self_pairs), frozenset(active.env_pairs)))
+        if active.layout.size <= _LEARNED_MAX_SLOTS:
+            _LAYOUTS.put(base_key, active.layout)
         result = _result(program, [*prior, *loop.runs], loop.margin)
         if result.success or loop.runs[-1].status not in _IPOPT_OK:
             return result, [*prior, *loop.runs]
@@ -347,7 +359,7 @@ class _Loop:
         or a run fails."""
         active = self.active
         for _round in range(max_rounds):
-            scan = active.scan(self.q_check, self.margin)
+            scan = active.scan(self.q_check, self.margin, near=not self.runs)
             if self.runs and not (scan.violated_self or scan.violated_env):
                 return  # no candidate outside the active set is violated
             active.grow(scan)

@@ -1,0 +1,95 @@
+"""Holds of the pairs that fixed contacts place (posturegen.stance_hold, active_set)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from posturegen.bench_reach import MARGIN, _problem
+from posturegen.collision.active_set import ActiveSet, placed_pairs
+from posturegen.collision.proxies import proxy_model
+from posturegen.collision.stance_hold import held_clearance, stance_posture, support_joints
+from posturegen.solver.solve import solve
+from posturegen.terms.contacts import FixedContact
+
+# the stance of issue 17's cliff: narrow, staggered, both feet yawed
+CLIFF = ([0.025, 0.081], [-0.028, -0.081], 0.045, 0.109)
+
+
+def _patch_error(problem, q: np.ndarray) -> float:
+    model = problem.robot.model
+    data = model.createData()
+    pin.forwardKinematics(model, data, q)
+    worst = 0.0
+    for c in problem.contacts:
+        T = data.oMi[c.patch.joint_id] * c.patch.T_joint_patch
+        worst = max(worst, float(np.abs(pin.log6(T.actInv(c.T_world_target)).vector).max()))
+    return worst
+
+
+@settings(max_examples=15, deadline=None)
+@given(
+    width=st.floats(0.15, 0.26),
+    stagger=st.floats(-0.05, 0.05),
+    yaw_l=st.floats(-0.2, 0.2),
+    yaw_r=st.floats(-0.2, 0.2),
+)
+def test_the_stance_posture_stands_on_the_fixed_contacts(width, stagger, yaw_l, yaw_r):
+    feet = ([stagger / 2, width / 2], [-stagger / 2, -width / 2], yaw_l, yaw_r)
+    problem = _problem(feet, [0.3, -0.3, 0.9], True)
+    fixed = [c for c in problem.contacts if isinstance(c, FixedContact)]
+    q = stance_posture(problem.robot, problem.q_init, fixed)
+    assert _patch_error(problem, q) < 1e-6
+    chain = support_joints(problem.robot.model, [c.patch.joint_id for c in fixed])
+    model = problem.robot.model
+    moved = {
+        j
+        for j in range(2, model.njoints)
+        if abs(q[model.joints[j].idx_q] - problem.q_init[model.joints[j].idx_q]) > 0
+    }
+    assert moved <= chain  # only the legs moved
+    assert moved or _patch_error(problem, problem.q_init) < 1e-6
+
+
+def test_holds_are_the_reference_rule_at_the_reference_stance_and_only_lower_elsewhere():
+    from posturegen.bench_reach import _ReachSampler
+
+    sampler = _ReachSampler()
+    home = _problem((*sampler.feet, *sampler.yaws), [0.3, -0.3, 0.9], True)
+    pm = proxy_model(home.robot)
+    reference = pm.pair_clearance(MARGIN)
+    assert np.allclose(held_clearance(home, pm, MARGIN), reference, atol=1e-9)
+    cliff = held_clearance(_problem(CLIFF, [0.3, -0.3, 0.9], True), pm, MARGIN)
+    assert np.all(cliff <= reference)
+    names = home.robot.model.names
+    lowered = {
+        tuple(sorted((names[int(a)], names[int(b)])))
+        for a, b in pm.joint_pairs[cliff < reference - 1e-4]
+    }
+    assert ("leg_left_4_joint", "leg_right_4_joint") in lowered  # the knees: 1 mm apart
+    assert all(a.startswith("leg_") and b.startswith("leg_") for a, b in lowered)
+
+
+def test_the_pair_of_the_two_fixed_feet_leaves_the_program_not_the_mesh_check():
+    problem = _problem(CLIFF, [0.4, -0.3, 0.9], True)
+    model = problem.robot.model
+    feet = (model.getJointId("leg_left_6_joint"), model.getJointId("leg_right_6_joint"))
+    assert placed_pairs(problem) == {tuple(sorted(feet))}
+    active = ActiveSet.of(problem)
+    held = {tuple(int(v) for v in active.pm.joint_pairs[k]) for k in active.links}
+    assert tuple(sorted(feet)) not in held
+    result = solve(problem)
+    assert result.success, result.message
+    assert result.iterations <= 40  # before: 184-442 iterations and no posture
+    unchecked = {tuple(e["pair"]) for e in result.posture["collision"]["unchecked"]}
+    assert ("leg_left_6_joint", "leg_right_6_joint") not in unchecked  # meshes tested
+
+
+def test_a_stance_without_fixed_contacts_has_no_caps():
+    problem = _problem(CLIFF, [0.4, -0.3, 0.9], True)
+    problem.contacts = []
+    assert placed_pairs(problem) == frozenset()
+    pm = proxy_model(problem.robot)
+    assert np.array_equal(held_clearance(problem, pm, MARGIN), pm.pair_clearance(MARGIN))
