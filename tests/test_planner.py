@@ -226,3 +226,31 @@ def test_successors_follow_the_rules_and_never_undo(on, kind, reach):
             assert not is_hand(a.patch)
             d = min(np.linalg.norm(np.array(a.target) - positions[p]) for p in on)
             assert d <= reach + 1e-9
+
+
+def test_a_problem_files_stance_walks_to_a_frame_goal(tmp_path):
+    """Start: a problem file's two fixed soles; goal: the base 0.3 m forward (a frame goal).
+    The plan steps forward on the ground; its last posture's base is within the tolerance,
+    every stage verified."""
+    robot = load_bundled("talos")
+    start = tmp_path / "start.yaml"
+    start.write_text(
+        "robot: talos\nmu: 0.7\n"
+        "surfaces:\n  - {name: ground, vertices: [[-1, -1], [1.5, -1], [1.5, 1], [-1, 1]]}\n"
+        "contacts:\n"
+        "  - {robot_patch: left_sole, surface: ground, type: fixed, position: [0.0, 0.085]}\n"
+        "  - {robot_patch: right_sole, surface: ground, type: fixed, position: [0.0, -0.085]}\n"
+    )
+    point = [0.3, 0.0, float(robot.q_init[2])]
+    goal = {"frame": "base_link", "point": point, "tolerance": 0.08, "weight": 0.3}
+    report = plan(str(start), tmp_path / "out", goal=goal, budget=Budget(nodes=20))
+    assert report.success and report.stats.reached
+    index = json.loads((tmp_path / "out" / "sequence.json").read_text())
+    last = None
+    for stage in index["stages"]:
+        last = json.loads((tmp_path / "out" / stage["posture"]).read_text())
+        assert stage["success"] and verify_posture(last, robot.model).ok, stage["name"]
+    q = np.array(last["q"])
+    assert np.linalg.norm(q[:3] - point) <= 0.08
+    held = {c["robot_patch"]["name"] for c in last["contacts"]}
+    assert {"left_sole", "right_sole"} <= held

@@ -6,7 +6,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..collision.active_set import SELF_PER_LINK, ActiveSet, box_label
-from ..collision.rows import CollisionTerm
+from ..collision.rows import ENV_SLOT_BLOCK, CollisionTerm
 from .problem import Program
 
 
@@ -14,7 +14,7 @@ def initial_collision_term(problem: Any) -> tuple[ActiveSet, CollisionTerm] | No
     """The candidates of ``problem`` and the collision rows of its first IPOPT run: the
     pairs near at the initial posture (None without collision avoidance). A later problem of
     the same structure in the same process also starts with the pairs its predecessors
-    needed."""
+    needed, in the slots of their layout (rows.Layout)."""
     opts = problem.collision_options
     if opts is None:
         return None
@@ -52,7 +52,8 @@ def _collision_lines(check: ActiveSet, term: CollisionTerm) -> list[str]:
     if check.boxes:
         boxes = ", ".join(box_label(b) for b in check.boxes)
         lines.append(
-            f"  collision.env: {len(term.env_pairs)} rows (one per sphere and box) of "
+            f"  collision.env: {len(term.env_rows())} rows (one per sphere slot and box, "
+            f"{ENV_SLOT_BLOCK} slots per link and box) holding {len(term.env_pairs)} of "
             f"{check.n_env_candidates} candidate sphere-box pairs, those closer than "
             f"{cm + 100 * opts.environment_activation:.3g} cm; boxes: {boxes}"
         )
