@@ -53,9 +53,8 @@ def test_the_rows_shown_are_those_of_the_first_ipopt_run(monkeypatch):
     data = _with([BOX], self_collision=True)
     problem = problem_from_dict(data)
     shown = _rows(describe(problem))
-    # no pairs, no layout from earlier solves
+    # no pairs from earlier solves
     monkeypatch.setattr(solve_module, "_LEARNED", BoundedCache("learned", 64))
-    monkeypatch.setattr(solve_module, "_LAYOUTS", BoundedCache("layouts", 64))
     first: list[dict[str, int]] = []
     real = solve_module._run_ipopt
 

@@ -17,7 +17,7 @@ import pinocchio as pin
 
 from .._cache import BoundedCache
 from ..collision.active_set import ActiveSet
-from ..collision.rows import CollisionTerm, Layout
+from ..collision.rows import CollisionTerm
 from ..collision.separation import separated_start
 from ..io.posture_file import add_solve_fields, posture_dict, write_posture
 from ..verify import VerifyReport, verify_posture
@@ -192,12 +192,12 @@ _LEARNED: BoundedCache[tuple[frozenset[tuple[int, int]], frozenset[tuple[int, in
 # 'left foot on rung 2' (infeasible): rows learned from the earlier stages and from the
 # solve's own continuations held it where it could not move.
 _LEARNED_MAX_PAIRS = 160
-# The layouts (rows.Layout: slots per joint pair and per link and box) of a structure's
-# solves, united: the next problem's rows fit in it and its solver is the compiled one; rows
-# of free slots only are unbounded, so a larger layout changes no posture. Before (each new
-# active set its own structure, 1.2 s of CPU to build on Talos):
-_LEARNED_MAX_SLOTS = 4000
-_LAYOUTS: BoundedCache[Layout] = BoundedCache("collision layouts", 64)
+# A solve's rows fill the slots of a layout (rows.Layout: 16 per joint pair, 4 per link and
+# box) that grows over its rounds: two active sets of the same joint pairs share a compiled
+# program. Layouts are not carried from one problem to the next: united over a structure's
+# solves, their constant rows of free slots changed IPOPT's path (its KKT systems grew), and
+# HRP-2's vertical ladder ('left foot on rung 2') and Talos' stairs ('right foot on step 3')
+# failed where they verify without.
 # collision rows start close to active: a smaller initial barrier parameter took 32 instead
 # of 44 median iterations on talos-near-body-collision (n = 20, mu_init 1e-2 against IPOPT's
 # 0.1); with the separated start (collision.separated_start) 1e-3 took 22.5 and 21.0 (two
@@ -303,7 +303,6 @@ def _solve_avoiding(
     base_key = (program.key(), len(active.boxes), opts.self_collision, opts.exclude)
     learned_self, learned_env = _LEARNED.get(base_key, (frozenset(), frozenset()))
     active.self_pairs, active.env_pairs = set(learned_self), set(learned_env)
-    active.layout = _LAYOUTS.get(base_key, Layout())
     run_options = _collision_solver_options(program.solver_options)
     loop = _Loop(program.but(solver_options=run_options), active, run_options, x0, joints0, layout)
     result: Result | None = None
@@ -311,8 +310,6 @@ def _solve_avoiding(
         loop.rounds(opts.max_rounds)
         if len(active.self_pairs) + len(active.env_pairs) <= _LEARNED_MAX_PAIRS:
             _LEARNED.put(base_key, (frozenset(active.self_pairs), frozenset(active.env_pairs)))
-        if active.layout.size <= _LEARNED_MAX_SLOTS:
-            _LAYOUTS.put(base_key, active.layout)
         result = _result(program, [*prior, *loop.runs], loop.margin)
         if result.success or loop.runs[-1].status not in _IPOPT_OK:
             return result, [*prior, *loop.runs]
