@@ -246,6 +246,9 @@ def test_a_problem_files_stance_walks_to_a_frame_goal(tmp_path):
     report = plan(str(start), tmp_path / "out", goal=goal, budget=Budget(nodes=20))
     assert report.success and report.stats.reached
     index = json.loads((tmp_path / "out" / "sequence.json").read_text())
+    stances = json.loads((tmp_path / "out" / "plan.json").read_text())["stances"]
+    assert {"left_sole@ground", "right_sole@ground"} <= set(stances)  # each foot alone once
+    assert len(stances) >= 5  # the base cannot move 0.3 m over fixed feet: both feet step
     last = None
     for stage in index["stages"]:
         last = json.loads((tmp_path / "out" / stage["posture"]).read_text())
