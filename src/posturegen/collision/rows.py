@@ -83,7 +83,8 @@ class Layout:
     ``self_slots`` (joint a, joint b, n): n sphere-pair slots of joint pair a < b;
     ``env_slots`` (joint, box, n): n sphere slots of a link and a box. The spheres are
     parameters, so two active sets that fit one layout share one compiled solver: a free
-    self slot is a pair DUMMY_GAP apart, a row of free slots only has no bound."""
+    self slot is a pair DUMMY_GAP apart, a row of free slots only is a constant without a
+    bound."""
 
     self_slots: tuple[tuple[int, int, int], ...] = ()
     env_slots: tuple[tuple[int, int, int], ...] = ()
@@ -139,8 +140,8 @@ class CollisionTerm(Term):
     def __post_init__(self) -> None:
         self.layout = self.layout.union(Layout.needed(self.pm, self.self_pairs, self.env_pairs))
         self._self_rows = _self_rows(self.pm, self.layout)
-        self._self_fill = _self_fill(self.pm, self.layout, self.self_pairs)
-        self._env_fill = _env_fill(self.pm, self.layout, self.env_pairs)
+        self._self_fill = _self_fill(self.pm, self.self_pairs)
+        self._env_fill = _env_fill(self.pm, self.env_pairs)
 
     def key(self) -> tuple[Any, ...]:
         return ("collision", self.layout, len(self.boxes))
@@ -316,9 +317,9 @@ def _self_rows(pm: ProxyModel, layout: Layout) -> list[tuple[tuple[int, int], li
 
 
 def _self_fill(
-    pm: ProxyModel, layout: Layout, self_pairs: tuple[tuple[int, int], ...]
+    pm: ProxyModel, self_pairs: tuple[tuple[int, int], ...]
 ) -> dict[tuple[int, int], list[tuple[int, int]]]:
-    """The sphere pairs of each joint pair (a, b) of the layout, sorted, each with its sphere
+    """The sphere pairs of each joint pair (a, b), sorted, each with its sphere
     on joint a first."""
     joint = pm.joint_ids
     out: dict[tuple[int, int], list[tuple[int, int]]] = {}
@@ -330,9 +331,9 @@ def _self_fill(
 
 
 def _env_fill(
-    pm: ProxyModel, layout: Layout, env_pairs: tuple[tuple[int, int], ...]
+    pm: ProxyModel, env_pairs: tuple[tuple[int, int], ...]
 ) -> dict[tuple[int, int], list[tuple[int, int]]]:
-    """The sphere-box pairs of each (joint, box) of the layout, sorted."""
+    """The sphere-box pairs of each (joint, box), sorted."""
     joint = pm.joint_ids
     out: dict[tuple[int, int], list[tuple[int, int]]] = {}
     for i, k in sorted(env_pairs):
