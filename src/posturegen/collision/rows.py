@@ -140,8 +140,24 @@ class CollisionTerm(Term):
     def __post_init__(self) -> None:
         self.layout = self.layout.union(Layout.needed(self.pm, self.self_pairs, self.env_pairs))
         self._self_rows = _self_rows(self.pm, self.layout)
-        self._self_fill = _self_fill(self.pm, self.self_pairs)
-        self._env_fill = _env_fill(self.pm, self.env_pairs)
+        fill = _self_fill(self.pm, self.self_pairs)
+        self._groups = [
+            (limb, [p for a, b, _ in slots for p in fill.get((a, b), [])])
+            for limb, slots in self._self_rows
+        ]
+        # the sphere pairs of every self slot in the rows' order (None: free)
+        self._self_slot_pairs = [
+            pair
+            for _, slots in self._self_rows
+            for a, b, count in slots
+            for pair in _padded(fill.get((a, b), []), count)
+        ]
+        env_fill = _env_fill(self.pm, self.env_pairs)
+        self._env_rows = [
+            pair
+            for joint, box, count in self.layout.env_slots
+            for pair in _padded(env_fill.get((joint, box), []), count)
+        ]
 
     def key(self) -> tuple[Any, ...]:
         return ("collision", self.layout, len(self.boxes))
@@ -213,18 +229,11 @@ class CollisionTerm(Term):
         about 12 % faster in generated C), and the smooth minimum carries a hand sliding from
         one link of a leg to the next; median iterations were 21.5 and 21.0 on two seeds
         (22.5 and 21.0 per pair of links), mean 24.5 and 22.1 (26.1 and 24.1)."""
-        return [
-            (limb, [p for a, b, _ in slots for p in self._self_fill.get((a, b), [])])
-            for limb, slots in self._self_rows
-        ]
+        return self._groups
 
     def env_rows(self) -> list[tuple[int, int] | None]:
         """The sphere-box pair of each env row, None for a free slot."""
-        return [
-            pair
-            for joint, box, count in self.layout.env_slots
-            for pair in _padded(self._env_fill.get((joint, box), []), count)
-        ]
+        return self._env_rows
 
     def held_links(self) -> list[int]:
         """The joint pairs (indices into ProxyModel.joint_pairs) of the layout, sorted."""
@@ -266,18 +275,13 @@ class CollisionTerm(Term):
         frame), r_a + r_b; a free slot: zeros and -DUMMY_GAP."""
         spheres = self.pm.spheres
         cols = []
-        slots = [slot for _, row in self._self_rows for slot in row]  # the rows' order
-        for a, b, count in slots:
-            for pair in _padded(self._self_fill.get((a, b), []), count):
-                if pair is None:
-                    cols.append(np.r_[np.zeros(6), -DUMMY_GAP])
-                    continue
-                i, j = pair
-                cols.append(
-                    np.r_[
-                        spheres[i].center, spheres[j].center, spheres[i].radius + spheres[j].radius
-                    ]
-                )
+        for pair in self._self_slot_pairs:
+            if pair is None:
+                cols.append(np.r_[np.zeros(6), -DUMMY_GAP])
+                continue
+            i, j = pair
+            radii = spheres[i].radius + spheres[j].radius
+            cols.append(np.r_[spheres[i].center, spheres[j].center, radii])
         return np.column_stack(cols)
 
     def _env_parameters(self) -> np.ndarray:

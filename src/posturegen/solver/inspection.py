@@ -14,7 +14,7 @@ def initial_collision_term(problem: Any) -> tuple[ActiveSet, CollisionTerm] | No
     """The candidates of ``problem`` and the collision rows of its first IPOPT run: the
     pairs near at the initial posture (None without collision avoidance). A later problem of
     the same structure in the same process also starts with the pairs its predecessors
-    needed, in the slots of their layout (rows.Layout)."""
+    needed (up to 160)."""
     opts = problem.collision_options
     if opts is None:
         return None
