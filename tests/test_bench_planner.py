@@ -60,13 +60,16 @@ def _stats(median: float, verified: int = 10) -> PassStats:
 
 
 def test_the_markdown_table_has_a_row_per_family_and_replaces_only_its_markers(tmp_path):
-    report = PlannerReport("talos-reach-balance-free", "", True, _stats(9.0, 9), _stats(4.0))
+    report = PlannerReport(
+        "talos-reach-balance-free", "", True, _stats(9.0, 9), _stats(4.0), _stats(3.0)
+    )
     lines = results_table("2026-12-02, a machine", True, [], [report])
     assert lines[0] == "Measured on 2026-12-02, a machine; generated C (`--jit`)."
     assert lines[2].count("|") == len(HEADER) + 1
     row = lines[-1].split(" | ")
     assert row[0] == "| `talos-reach-balance-free`" and row[2] == "10/10"
     assert row[4:7] == ["4.0", "8.0", "9.0 (18.0), 9/10 verified"]
+    assert row[8] == "3.0 (6.0), 12 |"  # the nearest-start pass
     readme = tmp_path / "README.md"
     readme.write_text("# x\nbefore\n<!-- bench:start -->\nold\n<!-- bench:end -->\nafter\n")
     write_markdown(readme, lines)
@@ -88,6 +91,7 @@ def test_bench_runs_a_planner_family_in_fresh_processes_and_writes_the_table(tmp
     assert code == 0
     assert lines[0].startswith("talos-reach-balance-free") and " first " in lines[0]
     assert " steady " in lines[1] and "verified=100.0%" in lines[1]
+    assert " nearest " in lines[2] and "verified=100.0%" in lines[2]
     table = out.read_text().splitlines()
     assert table[-1].startswith("| `talos-reach-balance-free` | 2 | 2/2 |")
 

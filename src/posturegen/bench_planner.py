@@ -5,9 +5,11 @@ A family (:data:`posturegen.bench_reach.PLANNER_FAMILIES`) runs in two child pro
 started afresh (``spawn``): the first solves the 2n problems untimed, so that the fitted
 proxies and every compiled library the problems meet are on disk; the second, a fresh
 interpreter, times every call: the *first pass* (problems 0..n-1, the first call included:
-it loads the robot, its proxies and its solvers) and the *steady state* (problems n..2n-1,
-after the first pass). A call is the whole of ``solve``: parameters, IPOPT's runs, the
-active set's rounds and the re-check.
+it loads the robot, its proxies and its solvers), the *steady state* (problems n..2n-1,
+after the first pass) and the *nearest* pass (problems 2n..3n-1, each started from the
+nearest verified solution of the calls before it: :class:`posturegen.solver.starts.
+NearestStarts`, what a planner's loop can do). A call is the whole of ``solve``: parameters,
+IPOPT's runs, the active set's rounds and the re-check.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import numpy as np
 
 from .bench_reach import PLANNER_FAMILIES
 from .solver.solve import solve
+from .solver.starts import NearestStarts
 
 
 @dataclass(frozen=True)
@@ -44,13 +47,14 @@ class PassStats:
 
 @dataclass(frozen=True)
 class PlannerReport:
-    """A planner family's first pass and steady state."""
+    """A planner family's first pass, steady state and nearest-start pass."""
 
     family: str
     description: str
     jit: bool
     first: PassStats
     steady: PassStats
+    nearest: PassStats | None = None
 
     def line(self) -> str:
         """One line per pass."""
@@ -60,27 +64,34 @@ class PlannerReport:
             f"max={s.max_call_ms:7.1f}  solve median={s.median_solve_ms:6.1f} ms  "
             f"iterations median={s.median_iterations:.0f} max={s.max_iterations}  "
             f"C {s.c_solves}/{s.n}  building calls {s.building_calls}"
-            for label, s in (("first", self.first), ("steady", self.steady))
+            for label, s in (
+                ("first", self.first),
+                ("steady", self.steady),
+                ("nearest", self.nearest),
+            )
+            if s is not None
         )
 
 
 def _problems(name: str, n: int, seed: int, jit: bool) -> list[Any]:
-    """The family's 2n problems, each with codegen ``sync`` (``jit``) or ``off``."""
-    problems = list(PLANNER_FAMILIES[name][1](2 * n, seed))
+    """The family's 3n problems, each with codegen ``sync`` (``jit``) or ``off``."""
+    problems = list(PLANNER_FAMILIES[name][1](3 * n, seed))
     mode = "sync" if jit else "off"
     for problem in problems:
         problem.solver_options = dataclasses.replace(problem.solver_options, codegen=mode)
     return problems
 
 
-def _pass(problems: list[Any]) -> PassStats:
-    """Solve and time each problem (the whole call)."""
+def _pass(problems: list[Any], starts: NearestStarts, nearest: bool = False) -> PassStats:
+    """Solve and time each problem (the whole call; with ``nearest``, the search for the
+    nearest start included), each verified solution added to ``starts``."""
     calls, solves, iters, failures = [], [], [], []
     verified = c_solves = building = 0
     for i, problem in enumerate(problems):
         t0 = time.perf_counter()
-        result = solve(problem)
+        result = solve(problem, start=starts.nearest(problem) if nearest else None)
         calls.append(1e3 * (time.perf_counter() - t0))
+        starts.add(problem, result)
         building += result.build_time_s > 0
         c_solves += bool(problem.compile().library)
         solves.append(1e3 * result.solve_time_s)
@@ -104,10 +115,11 @@ def _pass(problems: list[Any]) -> PassStats:
 
 
 def _child(name: str, n: int, seed: int, jit: bool) -> PlannerReport:
-    """In a child process: the two passes."""
-    problems = _problems(name, n, seed, jit)
-    first, steady = _pass(problems[:n]), _pass(problems[n:])
-    return PlannerReport(name, PLANNER_FAMILIES[name][0], jit, first, steady)
+    """In a child process: the three passes."""
+    problems, starts = _problems(name, n, seed, jit), NearestStarts()
+    first, steady = _pass(problems[:n], starts), _pass(problems[n : 2 * n], starts)
+    nearest = _pass(problems[2 * n :], starts, nearest=True)
+    return PlannerReport(name, PLANNER_FAMILIES[name][0], jit, first, steady, nearest)
 
 
 def _in_fresh_process(name: str, n: int, seed: int, jit: bool) -> PlannerReport:
@@ -117,7 +129,7 @@ def _in_fresh_process(name: str, n: int, seed: int, jit: bool) -> PlannerReport:
 
 
 def run_planner_family(name: str, n: int = 100, seed: int = 0, jit: bool = False) -> PlannerReport:
-    """A planner family's first pass and steady state, each of n problems, in a fresh
-    process after another one warmed the disk caches (see the module doc)."""
+    """A planner family's first pass, steady state and nearest pass, each of n problems, in
+    a fresh process after another one warmed the disk caches (see the module doc)."""
     _in_fresh_process(name, n, seed, jit)  # the disk caches warmed
     return _in_fresh_process(name, n, seed, jit)

@@ -22,6 +22,7 @@ HEADER = (
     "call p90 [ms]",
     "first pass: call median (p90) [ms]",
     "iterations median",
+    "nearest start: call median (p90) [ms], iterations",
 )
 
 
@@ -40,12 +41,14 @@ def family_row(r: FamilyReport) -> list[str]:
         _ms(r.p90_call_ms),
         "",
         f"{r.median_iterations:.0f}",
+        "",
     ]
 
 
 def planner_row(r: PlannerReport) -> list[str]:
-    """A planner family: the steady state, and the first pass of a fresh process."""
-    s, f = r.steady, r.first
+    """A planner family: the steady state, the first pass of a fresh process, and the
+    calls started from the nearest solution."""
+    s, f, n = r.steady, r.first, r.nearest
     return [
         f"`{r.family}`",
         str(s.n),
@@ -55,6 +58,9 @@ def planner_row(r: PlannerReport) -> list[str]:
         _ms(s.p90_call_ms),
         f"{_ms(f.median_call_ms)} ({_ms(f.p90_call_ms)}), {f.verified}/{f.n} verified",
         f"{s.median_iterations:.0f}",
+        ""
+        if n is None
+        else f"{_ms(n.median_call_ms)} ({_ms(n.p90_call_ms)}), {n.median_iterations:.0f}",
     ]
 
 

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from ._cache import BoundedCache
 from .checks import Check, VerifyReport
 from .collision.mesh_check import mesh_collision_checks
 from .errors import InputError
@@ -145,14 +146,26 @@ def _torque_limits(model: pin.Model, tau: np.ndarray, scale: float) -> Check:
     return Check("torque limits", float(max(over.max(initial=0.0), 0.0)), TOL_TORQUE)
 
 
+# the polygons of the surfaces and robot patches that postures name (a posture file's
+# vertices; validated and built once each)
+_POLYGONS: BoundedCache[ConvexPolygon] = BoundedCache("verified polygons", 256)
+
+
+def polygon(vertices: Any) -> ConvexPolygon:
+    """The convex polygon of a posture file's vertices list [[x, y], ...] [m] (cached on
+    their values)."""
+    key = tuple(tuple(float(c) for c in v) for v in vertices)
+    return _POLYGONS.get_or_make(key, lambda: ConvexPolygon(np.array(key, dtype=float)))
+
+
 def _frames(contact: dict[str, Any], model: pin.Model, data: pin.Data) -> _ContactFrames:
     surf, rp = contact["surface"], contact["robot_patch"]
     T_wc = data.oMf[model.getFrameId(rp["frame"])] * pin.SE3(np.array(rp["placement"], float))
     return _ContactFrames(
         pin.SE3(np.array(surf["placement"], dtype=float)),
-        ConvexPolygon(np.array(surf["vertices"], dtype=float)),
+        polygon(surf["vertices"]),
         T_wc,
-        ConvexPolygon(np.array(rp["vertices"], dtype=float)),
+        polygon(rp["vertices"]),
     )
 
 

@@ -165,6 +165,11 @@ class ProxyModel:
         )
 
     @property
+    def centers_local(self) -> np.ndarray:
+        """(S, 3) sphere centres [m], each in its joint's frame."""
+        return self._local
+
+    @property
     def radii(self) -> np.ndarray:
         """(S,) radii [m]."""
         return self._radii

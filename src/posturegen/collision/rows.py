@@ -273,28 +273,32 @@ class CollisionTerm(Term):
     def _self_parameters(self) -> np.ndarray:
         """(7, slots) per slot: sphere a's centre, sphere b's centre (each in its joint's
         frame), r_a + r_b; a free slot: zeros and -DUMMY_GAP."""
-        spheres = self.pm.spheres
-        cols = []
-        for pair in self._self_slot_pairs:
-            if pair is None:
-                cols.append(np.r_[np.zeros(6), -DUMMY_GAP])
-                continue
-            i, j = pair
-            radii = spheres[i].radius + spheres[j].radius
-            cols.append(np.r_[spheres[i].center, spheres[j].center, radii])
-        return np.column_stack(cols)
+        return _slot_columns(self.pm, self._self_slot_pairs, pair=True)
 
     def _env_parameters(self) -> np.ndarray:
         """(4, slots) per slot: the sphere's centre in its joint's frame, its radius (a free
         slot: -DUMMY_GAP, its row saturated, a constant)."""
-        spheres = self.pm.spheres
-        cols = [
-            np.r_[0.0, 0.0, 0.0, -DUMMY_GAP]
-            if pair is None
-            else np.r_[spheres[pair[0]].center, spheres[pair[0]].radius]
-            for pair in self.env_rows()
-        ]
-        return np.column_stack(cols)
+        return _slot_columns(self.pm, self.env_rows(), pair=False)
+
+
+def _slot_columns(pm: ProxyModel, slots: list[Any], pair: bool) -> np.ndarray:
+    """The slots' sphere parameters, one column each: (7, n) for sphere pairs (i, j) (centres
+    of i and j, r_i + r_j) or (4, n) for (sphere, box) slots (centre, radius); a free slot
+    (None): zeros and -DUMMY_GAP."""
+    rows = 7 if pair else 4
+    out = np.zeros((rows, len(slots)))
+    out[-1] = -DUMMY_GAP
+    live = [k for k, s in enumerate(slots) if s is not None]
+    if live:
+        idx = np.array([slots[k] for k in live], dtype=int)  # (m, 2)
+        centers, radii = pm.centers_local, pm.radii
+        out[0:3, live] = centers[idx[:, 0]].T
+        if pair:
+            out[3:6, live] = centers[idx[:, 1]].T
+            out[6, live] = radii[idx[:, 0]] + radii[idx[:, 1]]
+        else:
+            out[3, live] = radii[idx[:, 0]]
+    return out
 
 
 def _padded(items: list[Any], count: int) -> list[Any]:

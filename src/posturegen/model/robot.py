@@ -89,6 +89,9 @@ class Robot:
         self._collision_model: pin.GeometryModel | None = None
         # posturegen.collision.proxies.ProxyModel, fitted on first use
         self._proxy_model: Any = None
+        # the resolved paths of the posture files' robot entry (resolved once: each solve
+        # writes one)
+        self._entry: dict[str, Any] | None = None
 
     @property
     def mass(self) -> float:
@@ -234,13 +237,15 @@ class Robot:
         return self._collision_model
 
     def to_dict(self) -> dict[str, Any]:
-        """The ``robot`` entry of a posture file."""
-        return {
-            "name": self.name,
-            "urdf": str(self.urdf.resolve()),
-            "srdf": str(self.srdf.resolve()) if self.srdf else None,
-            "package_dirs": [str(p.resolve()) for p in self.package_dirs],
-        }
+        """The ``robot`` entry of a posture file (a new dict each call)."""
+        if self._entry is None:
+            self._entry = {
+                "name": self.name,
+                "urdf": str(self.urdf.resolve()),
+                "srdf": str(self.srdf.resolve()) if self.srdf else None,
+                "package_dirs": [str(p.resolve()) for p in self.package_dirs],
+            }
+        return {**self._entry, "package_dirs": list(self._entry["package_dirs"])}
 
 
 def _frame_names(model: pin.Model) -> list[str]:

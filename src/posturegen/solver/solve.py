@@ -21,8 +21,9 @@ from ..collision.rows import CollisionTerm
 from ..collision.separation import separated_start
 from ..io.posture_file import add_solve_fields, posture_dict, write_posture
 from ..verify import VerifyReport, verify_posture
-from .compile import CompiledNLP, is_compiled
+from .compile import CompiledNLP, is_compiled, numeric, symbolic
 from .problem import Problem, Program, SolverOptions
+from .starts import START_MU_INIT, Solved, start_vector
 
 _IPOPT_OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
 
@@ -59,6 +60,10 @@ class Result:
     # whether it ran generated C (posturegen.solver.codegen)
     constraint_rows: int = 0
     generated_c: bool = False
+    # the last run's variables (n_x,) and their blocks: what starts another solve
+    # (solve(problem, start=result))
+    x: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
+    x_blocks: dict[str, slice] = dataclasses.field(default_factory=dict)
 
     @property
     def max_violation(self) -> float:
@@ -222,7 +227,7 @@ COLLISION_PERTURBATION: tuple[float, float] | None = (1e-3, 10.0)
 TORQUE_CONTINUATION = 2.0
 
 
-def solve(problem: Problem, x0: np.ndarray | None = None) -> Result:
+def solve(problem: Problem, x0: np.ndarray | None = None, start: Solved | None = None) -> Result:
     """Solve the posture problem and verify the posture; never raises for 'not found'.
 
     With collision avoidance, IPOPT runs in an active-set loop (see posturegen.collision.rows):
@@ -233,9 +238,15 @@ def solve(problem: Problem, x0: np.ndarray | None = None) -> Result:
     starts with them. When IPOPT does not converge, two continuations follow: without the
     collision rows, then with the torque limits relaxed, each solution starting the real
     program again. The Result counts every IPOPT run. Why a failure failed:
-    :func:`posturegen.solver.diagnose.diagnose`."""
+    :func:`posturegen.solver.diagnose.diagnose`.
+
+    ``x0``: the variables to start from (this problem's layout); ``start``: a solved posture
+    of the same robot to start from instead (:mod:`posturegen.solver.starts`; a planner's
+    nearest solution), IPOPT's barrier then starting at START_MU_INIT unless set."""
     x_start = None if x0 is None else np.asarray(x0, dtype=float)
     program = Program.of(problem)
+    if start is not None and x_start is None:
+        program, x_start = _started(program, start)
     result, runs = _solve_continued(program, x_start, [])
     effort = problem.robot.effort_limit
     if result.success or result.status in _IPOPT_OK or not np.any(np.isfinite(effort)):
@@ -403,6 +414,17 @@ def _message(status: str, report: VerifyReport) -> str:
     )
 
 
+def _started(program: Program, start: Solved) -> tuple[Program, np.ndarray]:
+    """The program with START_MU_INIT (unless its options set one) and ``start`` laid out
+    as its variables."""
+    if program.solver_options.mu_init is None and program.collision_options is None:
+        options = dataclasses.replace(program.solver_options, mu_init=START_MU_INIT)
+        program = program.but(solver_options=options)
+    layout = symbolic(program)  # the variables' blocks (no solver built)
+    x_init = numeric(program, layout)[0]
+    return program, start_vector(program, x_init, layout.x_index, start)
+
+
 def _result(program: Program, runs: list[_Run], margin: float | None = None) -> Result:
     """The Result of the last run (times and iterations summed over every run)."""
     run = runs[-1]
@@ -440,6 +462,8 @@ def _result(program: Program, runs: list[_Run], margin: float | None = None) -> 
         posture=posture,
         constraint_rows=run.compiled.n_g,
         generated_c=run.compiled.library,
+        x=run.x,
+        x_blocks=dict(run.compiled.x_index),
     )
 
 
