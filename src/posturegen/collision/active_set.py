@@ -21,7 +21,7 @@ from .._cache import BoundedCache, Ref
 from ..model.kinematics import scratch_data
 from ..terms.contacts import FixedContact
 from .boxes import CollisionOptions, EnvBox, env_boxes, excluded_joint_ids, row_box_distances
-from .proxies import ProxyModel, closest, proxy_model
+from .proxies import Close, ProxyModel, closest, proxy_model
 from .rows import CollisionTerm, Layout
 from .stance_hold import stance_caps
 
@@ -43,6 +43,9 @@ SELF_SLACK = 1e-3
 
 # near self pairs per (proxy model, posture, slack, links): a planner's queries start at one posture
 _NEAR: BoundedCache[frozenset[tuple[int, int]]] = BoundedCache("near self pairs", 64)
+# the self pairs below their threshold at a posture, for the first scan of a solve (its
+# initial posture, the same for a planner's queries); keyed like _NEAR
+_BELOW: BoundedCache[Close] = BoundedCache("self pairs below threshold", 64)
 
 
 def violation_threshold(clearance: np.ndarray) -> np.ndarray:
@@ -114,7 +117,7 @@ class ActiveSet:
         out = Scan()
         clearance = np.minimum(self.pm.pair_clearance(margin), self.caps)
         if len(self.links):
-            bad = self.pm.close_pairs(centers, violation_threshold(clearance), self.links)
+            bad = self._below(q, centers, violation_threshold(clearance), cache=near)
             held = np.array(
                 [
                     (min(a, b), max(a, b)) in self.self_pairs
@@ -145,6 +148,21 @@ class ActiveSet:
         )
         self.layout = term.layout
         return term
+
+    def _below(self, q: np.ndarray, centers: np.ndarray, slack: np.ndarray, cache: bool) -> Close:
+        """The candidate self pairs closer than ``slack`` (P,) [m] at q (centres (S, 3));
+        cached when ``cache`` (a solve's first posture)."""
+        if not cache:
+            return self.pm.close_pairs(centers, slack, self.links)
+        key = (Ref(self.pm), q.tobytes(), slack.tobytes(), self.links.tobytes())
+
+        def make() -> Close:
+            found = self.pm.close_pairs(centers, slack, self.links)
+            for a in (found.i, found.j, found.link, found.d):
+                a.flags.writeable = False  # shared by every solve from this posture
+            return found
+
+        return _BELOW.get_or_make(key, make)
 
     def _near_self(self, q: np.ndarray, centers: np.ndarray, slack: np.ndarray) -> set:
         """The SELF_PER_LINK closest sphere pairs of each candidate pair of links closer than

@@ -64,6 +64,9 @@ class Result:
     # (solve(problem, start=result))
     x: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
     x_blocks: dict[str, slice] = dataclasses.field(default_factory=dict)
+    # and its multipliers: of the variables' bounds (n_x,), of each constraint block
+    lam_x: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
+    lam_g: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
 
     @property
     def max_violation(self) -> float:
@@ -242,12 +245,15 @@ def solve(problem: Problem, x0: np.ndarray | None = None, start: Solved | None =
 
     ``x0``: the variables to start from (this problem's layout); ``start``: a solved posture
     of the same robot to start from instead (:mod:`posturegen.solver.starts`; a planner's
-    nearest solution), IPOPT's barrier then starting at START_MU_INIT unless set."""
+    nearest solution): without collision avoidance its multipliers too (IPOPT's warm start,
+    SolverOptions.warm_start), else its variables, the active-set loop's own barrier
+    parameter then (COLLISION_MU_INIT). The continuations start from its variables."""
     x_start = None if x0 is None else np.asarray(x0, dtype=float)
     program = Program.of(problem)
+    first, duals = program, None
     if start is not None and x_start is None:
-        program, x_start = _started(program, start)
-    result, runs = _solve_continued(program, x_start, [])
+        first, x_start, duals = _started(program, start)
+    result, runs = _solve_continued(first, x_start, [], duals)
     effort = problem.robot.effort_limit
     if result.success or result.status in _IPOPT_OK or not np.any(np.isfinite(effort)):
         return result
@@ -266,14 +272,19 @@ def _outputs(run: _Run) -> dict[str, np.ndarray]:
 
 
 def _solve_continued(
-    program: Program, x_start: np.ndarray | None, prior: list[_Run]
+    program: Program,
+    x_start: np.ndarray | None,
+    prior: list[_Run],
+    duals: tuple[np.ndarray, dict[str, np.ndarray]] | None = None,
 ) -> tuple[Result, list[_Run]]:
     """One solve from ``x_start`` (the active-set loop with collision avoidance, and the
     collision continuation when it fails); ``prior`` runs count in the Result. Returns the
-    Result and every run so far."""
+    Result and every run so far. ``duals``: (lam_x, lam_g per block) of a warm start
+    (without collision avoidance)."""
     program = program.but(collision_term=None)
     if program.collision_options is None:
-        runs = [*prior, _run_ipopt(program, x_start)]
+        lam_x0, lam_g0 = duals if duals is not None else (None, None)
+        runs = [*prior, _run_ipopt(program, x_start, lam_x0, lam_g0)]
         return _result(program, runs), runs
     result, runs = _solve_avoiding(program, x_start, prior)
     if result.success:
@@ -414,15 +425,25 @@ def _message(status: str, report: VerifyReport) -> str:
     )
 
 
-def _started(program: Program, start: Solved) -> tuple[Program, np.ndarray]:
-    """The program with START_MU_INIT (unless its options set one) and ``start`` laid out
-    as its variables."""
-    if program.solver_options.mu_init is None and program.collision_options is None:
-        options = dataclasses.replace(program.solver_options, mu_init=START_MU_INIT)
-        program = program.but(solver_options=options)
+def _started(
+    program: Program, start: Solved
+) -> tuple[Program, np.ndarray, tuple[np.ndarray, dict[str, np.ndarray]] | None]:
+    """The first program of a solve from ``start``, its variables laid out for it, and its
+    multipliers when the program has no collision rows and the start has them (IPOPT's warm
+    start; else the barrier from START_MU_INIT unless the options set one)."""
     layout = symbolic(program)  # the variables' blocks (no solver built)
     x_init = numeric(program, layout)[0]
-    return program, start_vector(program, x_init, layout.x_index, start)
+    x = start_vector(program, x_init, layout.x_index, start)
+    if program.collision_options is not None:
+        return program, x, None
+    options = program.solver_options
+    if start.lam_x.size and start.lam_g:
+        lam_x = _carried(start.lam_x, start.x_blocks, layout.x_index, np.zeros_like(x))
+        warm = dataclasses.replace(options, warm_start=True)
+        return program.but(solver_options=warm), x, (lam_x, dict(start.lam_g))
+    if options.mu_init is None:
+        options = dataclasses.replace(options, mu_init=START_MU_INIT)
+    return program.but(solver_options=options), x, None
 
 
 def _result(program: Program, runs: list[_Run], margin: float | None = None) -> Result:
@@ -464,6 +485,10 @@ def _result(program: Program, runs: list[_Run], margin: float | None = None) -> 
         generated_c=run.compiled.library,
         x=run.x,
         x_blocks=dict(run.compiled.x_index),
+        lam_x=np.zeros(0) if run.lam_x is None else run.lam_x,
+        lam_g={}
+        if run.lam_g is None
+        else {name: run.lam_g[sl] for name, sl in run.compiled.g_index.items()},
     )
 
 
