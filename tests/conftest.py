@@ -28,16 +28,16 @@ def talos():
 
 
 def first_run_stops_early(real: Callable, calls: list, record: Callable) -> Callable:
-    """A stand-in for one of solve()'s steps ``real(program, x0, prior)`` (a
+    """A stand-in for one of solve()'s steps ``real(program, x0, prior, *rest)`` (a
     :class:`posturegen.solver.problem.Program`) whose first call stops IPOPT after 3
     iterations (a failure); each call appends ``record(program, x0, prior)`` to ``calls``."""
 
-    def step(program: Any, x0: Any, prior: Any) -> Any:
+    def step(program: Any, x0: Any, prior: Any, *rest: Any) -> Any:
         calls.append(record(program, x0, prior))
         if len(calls) == 1:
             options = dataclasses.replace(program.solver_options, max_iter=3)
-            return real(program.but(solver_options=options), x0, prior)
-        return real(program, x0, prior)
+            return real(program.but(solver_options=options), x0, prior, *rest)
+        return real(program, x0, prior, *rest)
 
     return step
 
