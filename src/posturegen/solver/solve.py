@@ -23,7 +23,7 @@ from ..io.posture_file import add_solve_fields, posture_dict, write_posture
 from ..verify import VerifyReport, verify_posture
 from .compile import CompiledNLP, is_compiled, numeric, symbolic
 from .problem import Problem, Program, SolverOptions
-from .starts import START_MU_INIT, Solved, start_vector
+from .starts import START_MU_INIT, Solved, carried, start_vector
 
 _IPOPT_OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
 
@@ -114,9 +114,9 @@ def _run_ipopt(
         compiled.refresh()  # generated C once it is built (posturegen.solver.codegen)
     x_init, p, lbg, ubg = program.numeric(compiled)
     if x0 is not None and layout is not None and layout != compiled.x_index:
-        x0 = _carried(x0, layout, compiled.x_index, x_init)
+        x0 = carried(x0, layout, compiled.x_index, x_init)
         if lam_x0 is not None:
-            lam_x0 = _carried(lam_x0, layout, compiled.x_index, np.zeros_like(x_init))
+            lam_x0 = carried(lam_x0, layout, compiled.x_index, np.zeros_like(x_init))
     if x0 is not None and x0.shape == x_init.shape:
         x_init = x0
     elif joints0 is not None:
@@ -150,23 +150,17 @@ def _run_ipopt(
     )
 
 
-def _carried(
-    values: np.ndarray, old: dict[str, slice], new: dict[str, slice], default: np.ndarray
-) -> np.ndarray:
-    """``values`` laid out by the blocks ``old``, moved to the blocks ``new`` (the blocks of
-    another size, or new ones, from ``default``)."""
-    out = default.copy()
-    for name, sl in new.items():
-        src = old.get(name)
-        if src is not None and src.stop - src.start == sl.stop - sl.start:
-            out[sl] = values[src]
-    return out
+def _per_block(run: _Run) -> dict[str, np.ndarray]:
+    """The run's constraint multipliers per block (none without them)."""
+    if run.lam_g is None:
+        return {}
+    return {name: run.lam_g[sl] for name, sl in run.compiled.g_index.items()}
 
 
 def _block_multipliers(run: _Run, term: Any) -> dict[str, np.ndarray]:
     """The last run's constraint multipliers per block; collision rows keyed by their pair so
     that they survive the growth of the active set (see _map_collision_multipliers)."""
-    out = {name: run.lam_g[sl] for name, sl in run.compiled.g_index.items()}
+    out: dict[str, Any] = _per_block(run)
     if term is not None:
         if "collision.self" in out:
             keys = [k for k, _ in term.self_groups()]
@@ -438,7 +432,7 @@ def _started(
         return program, x, None
     options = program.solver_options
     if start.lam_x.size and start.lam_g:
-        lam_x = _carried(start.lam_x, start.x_blocks, layout.x_index, np.zeros_like(x))
+        lam_x = carried(start.lam_x, start.x_blocks, layout.x_index, np.zeros_like(x))
         warm = dataclasses.replace(options, warm_start=True)
         return program.but(solver_options=warm), x, (lam_x, dict(start.lam_g))
     if options.mu_init is None:
@@ -486,9 +480,7 @@ def _result(program: Program, runs: list[_Run], margin: float | None = None) -> 
         x=run.x,
         x_blocks=dict(run.compiled.x_index),
         lam_x=np.zeros(0) if run.lam_x is None else run.lam_x,
-        lam_g={}
-        if run.lam_g is None
-        else {name: run.lam_g[sl] for name, sl in run.compiled.g_index.items()},
+        lam_g=_per_block(run),
     )
 
 

@@ -46,16 +46,25 @@ class Solved(Protocol):
     lam_g: Mapping[str, np.ndarray]  # each constraint block's multipliers
 
 
+def carried(
+    values: np.ndarray, old: Mapping[str, slice], new: Mapping[str, slice], default: np.ndarray
+) -> np.ndarray:
+    """``values`` laid out by the blocks ``old``, moved to the blocks ``new`` (the blocks of
+    another size, or new ones, from ``default``)."""
+    out = default.copy()
+    for name, sl in new.items():
+        src = old.get(name)
+        if src is not None and src.stop - src.start == sl.stop - sl.start:
+            out[sl] = values[src]
+    return out
+
+
 def start_vector(
     program: Program, x_init: np.ndarray, x_index: Mapping[str, slice], start: Solved
 ) -> np.ndarray:
     """``start``'s variables laid out as ``x_index`` (n_x,): blocks of equal size carried,
     the base rotation relative to this program's R0, the others from ``x_init``."""
-    x = x_init.copy()
-    for name, sl in x_index.items():
-        src = start.x_blocks.get(name)
-        if src is not None and src.stop - src.start == sl.stop - sl.start:
-            x[sl] = start.x[src]
+    x = carried(start.x, start.x_blocks, x_index, x_init)
     R0 = pin.Quaternion(program.q_init[3:7]).normalized().matrix()
     R = pin.Quaternion(start.q[3:7]).normalized().matrix()
     w = pin.log3(R0.T @ R)  # (3,) [rad]
