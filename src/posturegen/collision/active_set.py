@@ -149,12 +149,17 @@ class ActiveSet:
         self.layout = term.layout
         return term
 
+    def _posture_key(self, q: np.ndarray, slack: np.ndarray) -> tuple[Any, ...]:
+        """The key of a scan's result at posture q with ``slack`` (P,) [m] over this set's
+        candidate links (the proxy model held)."""
+        return (Ref(self.pm), q.tobytes(), slack.tobytes(), self.links.tobytes())
+
     def _below(self, q: np.ndarray, centers: np.ndarray, slack: np.ndarray, cache: bool) -> Close:
         """The candidate self pairs closer than ``slack`` (P,) [m] at q (centres (S, 3));
         cached when ``cache`` (a solve's first posture)."""
         if not cache:
             return self.pm.close_pairs(centers, slack, self.links)
-        key = (Ref(self.pm), q.tobytes(), slack.tobytes(), self.links.tobytes())
+        key = self._posture_key(q, slack)
 
         def make() -> Close:
             found = self.pm.close_pairs(centers, slack, self.links)
@@ -168,7 +173,7 @@ class ActiveSet:
         """The SELF_PER_LINK closest sphere pairs of each candidate pair of links closer than
         ``slack`` (P,) [m] at q (centres (S, 3)); cached per posture: a planner's queries
         start at the same one."""
-        key = (Ref(self.pm), q.tobytes(), slack.tobytes(), self.links.tobytes())
+        key = self._posture_key(q, slack)
 
         def make() -> frozenset[tuple[int, int]]:
             near = closest(self.pm.close_pairs(centers, slack, self.links), SELF_PER_LINK)
