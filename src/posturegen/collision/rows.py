@@ -6,7 +6,7 @@ at most 1 cm outside it; the candidate self pairs are every pair of links that t
 (:mod:`posturegen.collision.pairs`) leaves checked, each held at least min(margin, its
 clearance at the reference posture) apart.
 
-Distances, as smooth CasADi expressions (:mod:`posturegen.collision.soft_min`):
+Distances, as smooth CasADi expressions:
 
 - sphere-sphere: ``|c_a - c_b| - r_a - r_b`` (smooth wherever the centres differ);
 - sphere-box: the six face distances ``s_k = n_k·c - h_k`` of the box give a conservative
@@ -17,8 +17,9 @@ Distances, as smooth CasADi expressions (:mod:`posturegen.collision.soft_min`):
 
 Self rows are one per pair of limbs (the kinematic chains between branchings): a smooth
 minimum (-LSE, SOFT_MIN_BETA) of their sphere pairs' distances minus each pair's clearance,
-computed in the base frame. They bring their own exact Jacobian and Hessian (through the
-links' twist Jacobians; tested equal to CasADi's).
+computed in the base frame, from blocks of 16 slots, each one call of a CasADi function
+(:mod:`posturegen.collision.self_blocks`). They bring their own exact Jacobian and Hessian
+(through the links' twist Jacobians; tested equal to CasADi's).
 
 Rows are kept few by an active set: of the pairs closer than ``activation`` beyond their
 clearance (self pairs; ``environment_activation`` beyond the margin for sphere-box pairs) at
@@ -45,15 +46,8 @@ from ..terms.nlp import BuildContext, Instance, Term
 from .boxes import EnvBox
 from .pairs import joint_pair
 from .proxies import ProxyModel
-from .soft_min import (
-    ENV_SATURATION,
-    Element,
-    Point,
-    box_element,
-    center,
-    pair_element,
-    soft_min_rows,
-)
+from .self_blocks import SELF_SLOT_BLOCK, Block, self_block_rows
+from .soft_min import ENV_SATURATION, Element, Point, box_element, center, soft_min_rows
 from .stance_hold import held_clearance
 
 # [m] a free slot's radii sum (self) or radius (env) is -DUMMY_GAP: its element of the row's
@@ -67,8 +61,8 @@ from .stance_hold import held_clearance
 DUMMY_GAP = 10.0
 FREE_ROW = 1.0
 # slots are given in blocks: SELF_SLOT_BLOCK per joint pair (the active set's SELF_PER_LINK
-# closest sphere pairs, then as many violated), ENV_SLOT_BLOCK per link and box
-SELF_SLOT_BLOCK = 16
+# closest sphere pairs, then as many violated; one call of the block's function each:
+# posturegen.collision.self_blocks), ENV_SLOT_BLOCK per link and box
 ENV_SLOT_BLOCK = 4
 
 
@@ -183,21 +177,16 @@ class CollisionTerm(Term):
         held = {k: held_p[m] for m, k in enumerate(links)}
         cap = nlp.parameter("collision.self_cap", len(self._self_rows))
         local = ctx.kin.forward(ca.SX.zeros(3), ca.SX.eye(3), ctx.joints)
-        points: list[Point] = []
-        slot_rows: list[list[Element]] = []
+        blocks: list[Block] = []
         s = 0
-        for _, slots in self._self_rows:
-            row = []
+        for k, (_, slots) in enumerate(self._self_rows):
             for a, b, count in slots:
                 clearance = held[self.pm.link_index(a, b)]
-                for _ in range(count):
-                    i, j = len(points), len(points) + 1
-                    points += [Point(a, P[0:3, s]), Point(b, P[3:6, s])]
-                    c = {i: center(local, points[i]), j: center(local, points[j])}
-                    row.append(pair_element(c, P[6, s], i, j, clearance))
-                    s += 1
-            slot_rows.append([*row, Element(cap[len(slot_rows)])])
-        value, deriv = soft_min_rows(ctx, local, points, slot_rows, 0.0, None)
+                for first in range(s, s + count, SELF_SLOT_BLOCK):
+                    blocks.append(Block(k, a, b, P[:, first : first + SELF_SLOT_BLOCK], clearance))
+                s += count
+        caps = [cap[k] for k in range(len(self._self_rows))]
+        value, deriv = self_block_rows(ctx, local, blocks, caps)
         nlp.constrain("collision.self", value, 0.0, np.inf, deriv)
 
     def _declare_env(self, ctx: BuildContext, margin: Any) -> None:

@@ -1,9 +1,9 @@
-"""The collision rows as smooth CasADi expressions and their own exact derivatives: each row
-is the smooth minimum (-LSE, SOFT_MIN_BETA) of elements, each a distance between sphere
-centres (:func:`pair_element`) or between a sphere and a box (:func:`box_element`), whose
-gradients and curvatures in the centres are known; :func:`soft_min_rows` maps them to the
-program's variables through the links' twist Jacobians (see :mod:`posturegen.collision.rows`
-for the rows themselves)."""
+"""The sphere-box rows as smooth CasADi expressions and their own exact derivatives: each
+row is the smooth minimum (-LSE, SOFT_MIN_BETA) of elements, a distance between a sphere and
+a box (:func:`box_element`) and a constant, whose gradients and curvatures in the centres are
+known; :func:`soft_min_rows` maps them to the program's variables through the links' twist
+Jacobians (see :mod:`posturegen.collision.rows` for the rows themselves, and
+:mod:`posturegen.collision.self_blocks` for the self rows, built from blocks of slots)."""
 
 from __future__ import annotations
 
@@ -40,24 +40,13 @@ def center(state: Any, sphere: Point) -> Any:
 
 @dataclass
 class Element:
-    """One argument v of a row's smooth minimum, a function of a few sphere centres c_i:
-    ``grads[i]`` = ∂v/∂c_i (3,), ``curvature[(i, j)]`` (i <= j) the (3, 3) block of
-    ∇²v - β∇v∇vᵀ (β = SOFT_MIN_BETA); a constant has neither."""
+    """One argument v of a row's smooth minimum, a function of sphere centres c_i, each
+    separately: ``grads[i]`` = ∂v/∂c_i (3,), ``curvature[i]`` the (3, 3) block (i, i) of
+    ∇²v - β∇v∇vᵀ (β = SOFT_MIN_BETA; no block between two centres); a constant has neither."""
 
     value: Any
     grads: dict[int, Any] = field(default_factory=dict)
-    curvature: dict[tuple[int, int], Any] = field(default_factory=dict)
-
-
-def pair_element(c: dict[int, Any], radii: Any, i: int, j: int, clearance: Any) -> Element:
-    """v = |c_i - c_j| - (r_i + r_j) - m (``radii`` r_i + r_j and m the pair's clearance,
-    parameters): ∇v = (n, -n), ∇²_u v = (I - nnᵀ)/|u| for u = c_i - c_j."""
-    u = c[i] - c[j]
-    length = ca.sqrt(ca.dot(u, u) + 1e-12)
-    n = u / length
-    K = (ca.SX.eye(3) - n @ n.T) / length - SOFT_MIN_BETA * (n @ n.T)
-    value = length - radii - clearance
-    return Element(value, {i: n, j: -n}, {(i, i): K, (j, j): K, (i, j): -K})
+    curvature: dict[int, Any] = field(default_factory=dict)
 
 
 def box_element(c: Any, i: int, box: Any, radius: Any) -> Element:
@@ -76,32 +65,25 @@ def box_element(c: Any, i: int, box: Any, radius: Any) -> Element:
     a = plus - minus
     grad = Rb @ a
     hess = Rb @ (BETA * (ca.diag(plus + minus) - a @ a.T)) @ Rb.T
-    return Element(v, {i: grad}, {(i, i): hess - SOFT_MIN_BETA * (grad @ grad.T)})
+    return Element(v, {i: grad}, {i: hess - SOFT_MIN_BETA * (grad @ grad.T)})
 
 
 class _TwistSum:
-    """Σ A_iᵀ X A_j (6, 6) over the sphere pairs of a pair of links, A = [I, -[ρ]×] the map
-    from a link twist to the velocity of its point p + ρ: the four 3×3 blocks summed, the
-    6×6 made once (per sphere pair it took a third of the build of Talos' rows)."""
+    """Σ A_iᵀ X A_i (6, 6) over the spheres of a link, A = [I, -[ρ]×] the map from a link
+    twist to the velocity of its point p + ρ: the four 3×3 blocks summed, the 6×6 made once."""
 
     def __init__(self) -> None:
-        self.blocks: list[Any] = [0, 0, 0, 0]  # X, -X[ρ_j], [ρ_i]X, -[ρ_i]X[ρ_j]
-        self.mirrored: list[Any] = [0, 0, 0, 0]  # the same, to add transposed
+        self.blocks: list[Any] = [0, 0, 0, 0]  # X, -X[ρ], [ρ]X, -[ρ]X[ρ]
 
-    def add(self, X: Any, skew_i: Any, skew_j: Any, twice: bool = False) -> None:
-        """Add A_iᵀ X A_j (and its transpose when ``twice``: i and j of one link)."""
-        Y = -X @ skew_j
-        target = self.mirrored if twice else self.blocks
+    def add(self, X: Any, skew_i: Any) -> None:
+        """Add A_iᵀ X A_i."""
+        Y = -X @ skew_i
         for k, v in enumerate((X, Y, skew_i @ X, skew_i @ Y)):
-            target[k] = target[k] + v
+            self.blocks[k] = self.blocks[k] + v
 
     def matrix(self) -> Any:
         """The 6×6 sum."""
-        out = _stack(self.blocks)
-        if any(not isinstance(b, int) for b in self.mirrored):
-            m = _stack(self.mirrored)
-            out = out + m + m.T
-        return out
+        return _stack(self.blocks)
 
 
 def _stack(blocks: list[Any]) -> Any:
@@ -169,7 +151,6 @@ class _Sums:
     """What the rows' derivatives accumulate (see :func:`soft_min_rows`)."""
 
     diag: dict[int, Any]  # Σ λ w K_ii per centre
-    cross: dict[tuple[int, int], Any]  # Σ λ w K_ij per pair of centres
     first: dict[int, Any]  # f_i = Σ λ ∂row/∂c_i
     jac_rows: list[Any]
     rank_one: Any  # Σ βλḡḡᵀ in z
@@ -192,7 +173,6 @@ def _soft_min_derivatives(
     nz = next(iter(J.values())).shape[1] if J else 0
     sums = _Sums(
         {i: ca.SX.zeros(3, 3) for i in link_of},
-        {},
         {i: ca.SX.zeros(3) for i in link_of},
         [],
         ca.SX(nz, nz),
@@ -200,7 +180,7 @@ def _soft_min_derivatives(
     for k, elements in enumerate(rows):
         _add_row(sums, k, elements, soft[k], lam, link_of, rho, J, nz)
     H = _curvature_hessian(sums, link_of, rho, J)
-    Hk = _kinematic_hessian(sums.first, link_of, spheres, state, J, z)
+    Hk = kinematic_hessian(_link_weights(sums.first, link_of, spheres, J), state, J, z)
     if Hk is not None:
         H = H + Hk
     jac = ca.vertcat(*sums.jac_rows) if sums.jac_rows else ca.SX(0, nz)
@@ -229,11 +209,8 @@ def _add_row(
     for e, w in zip(elements, weights, strict=True):
         for i, g in e.grads.items():
             gbar[i] = gbar.get(i, 0) + w * g
-        for (i, j), K in e.curvature.items():
-            if i == j:
-                sums.diag[i] = sums.diag[i] + lam[k] * w * K
-            else:
-                sums.cross[(i, j)] = sums.cross.get((i, j), 0) + lam[k] * w * K
+        for i, K in e.curvature.items():
+            sums.diag[i] = sums.diag[i] + lam[k] * w * K
     wrench: dict[int, Any] = {}
     for i, g in gbar.items():
         sums.first[i] = sums.first[i] + lam[k] * g
@@ -253,49 +230,47 @@ def _add_row(
 def _curvature_hessian(
     sums: _Sums, link_of: dict[int, int], rho: dict[int, Any], J: dict[int, Any]
 ) -> Any:
-    """The rank-one terms and Σ J_Lᵀ (A_iᵀ K A_j) J_L' over the curvature blocks, summed per
-    pair of links first."""
-    sk = {i: skew(r) for i, r in rho.items()}  # [ρ_i]×, once per sphere
-    blocks: dict[tuple[int, int], _TwistSum] = {}
+    """The rank-one terms and Σ J_Lᵀ (A_iᵀ K_i A_i) J_L over the curvature blocks, summed
+    per link first."""
+    blocks: dict[int, _TwistSum] = {}
     for i, D in sums.diag.items():
-        L = link_of[i]
-        blocks.setdefault((L, L), _TwistSum()).add(D, sk[i], sk[i])
-    for (i, j), X in sums.cross.items():
-        a, b = (i, j) if link_of[i] <= link_of[j] else (j, i)
-        X = X if a == i else X.T
-        key = (link_of[a], link_of[b])
-        blocks.setdefault(key, _TwistSum()).add(X, sk[a], sk[b], twice=key[0] == key[1])
+        blocks.setdefault(link_of[i], _TwistSum()).add(D, skew(rho[i]))
     H = sums.rank_one
-    for (La, Lb), M in blocks.items():
-        part = J[La].T @ M.matrix() @ J[Lb]
-        H = H + (part if La == Lb else part + part.T)
+    for L, M in blocks.items():
+        H = H + J[L].T @ M.matrix() @ J[L]
     return H
 
 
-def _kinematic_hessian(
-    first: dict[int, Any],
-    link_of: dict[int, int],
-    spheres: list[Point],
-    state: Any,
-    J: dict[int, Any],
-    z: Any,
+def kinematic_hessian(
+    weights: dict[int, tuple[Any, Any]], state: Any, J: dict[int, Any], z: Any
 ) -> Any:
     """Σ_L ∇²_z(F_L·p_L + <G_L, R_L>): the second derivatives of the kinematics weighted by
-    the first-order ones (F_L = Σ f_i, G_L = Σ f_i s_iᵀ held fixed); None without links."""
+    the first-order ones (``weights[L]`` = (F_L (3,), G_L (3, 3)) held fixed; L over the
+    links of J); None without links."""
     syms, vals, weighted = [], [], 0
     for L in sorted(J):
         F, G = ca.SX.sym(f"F{L}", 3), ca.SX.sym(f"G{L}", 3, 3)
-        mine = [i for i in first if link_of[i] == L]
         syms += [F, ca.vec(G)]
-        vals += [
-            sum((first[i] for i in mine), ca.SX.zeros(3)),
-            ca.vec(sum((first[i] @ spheres[i].center.T for i in mine), ca.SX.zeros(3, 3))),
-        ]
+        vals += [weights[L][0], ca.vec(weights[L][1])]
         weighted = weighted + ca.dot(F, state.p[L]) + ca.sum1(ca.sum2(G * state.R[L]))
     if not syms:
         return None
     Hk = ca.hessian(weighted, z)[0]
     return ca.substitute(Hk, ca.vertcat(*syms), ca.vertcat(*vals))
+
+
+def _link_weights(
+    first: dict[int, Any], link_of: dict[int, int], spheres: list[Point], links: Any
+) -> dict[int, tuple[Any, Any]]:
+    """(F_L, G_L) = (Σ f_i, Σ f_i s_iᵀ) over the spheres i of each link L."""
+    out = {}
+    for L in links:
+        mine = [i for i in first if link_of[i] == L]
+        out[L] = (
+            sum((first[i] for i in mine), ca.SX.zeros(3)),
+            sum((first[i] @ spheres[i].center.T for i in mine), ca.SX.zeros(3, 3)),
+        )
+    return out
 
 
 class Point(NamedTuple):
