@@ -151,8 +151,9 @@ class ActiveSet:
 
     def _posture_key(self, q: np.ndarray, slack: np.ndarray) -> tuple[Any, ...]:
         """The key of a scan's result at posture q with ``slack`` (P,) [m] over this set's
-        candidate links (the proxy model held)."""
-        return (Ref(self.pm), q.tobytes(), slack.tobytes(), self.links.tobytes())
+        candidate links (the proxy model held). Self distances do not depend on the base
+        pose, so the key holds q's joints only: stances placed differently share it."""
+        return (Ref(self.pm), q[7:].tobytes(), slack.tobytes(), self.links.tobytes())
 
     def _below(self, q: np.ndarray, centers: np.ndarray, slack: np.ndarray, cache: bool) -> Close:
         """The candidate self pairs closer than ``slack`` (P,) [m] at q (centres (S, 3));

@@ -55,9 +55,9 @@ def separated_start(
     steps towards a target near the body were cut to a few percent by those rows:
     talos-near-body-collision took 26.5 and 24.5 median iterations (two seeds), 25.0 and 23.5
     from the separated start, 22.5 and 21.0 with it and COLLISION_MU_INIT = 1e-3."""
-    key = (
+    key = (  # the base pose moves no self distance: q's joints only
         Ref(robot.model),
-        np.asarray(q, dtype=float).tobytes(),
+        np.asarray(q, dtype=float)[7:].tobytes(),
         margin,
         tuple(contact_joints),
         hashlib.sha1(np.asarray(links).tobytes()).digest(),
