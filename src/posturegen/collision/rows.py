@@ -36,7 +36,7 @@ from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import casadi as ca
 import numpy as np
@@ -130,6 +130,7 @@ class CollisionTerm(Term):
     margin: float
     layout: Layout = field(default_factory=Layout)
     name: str = "collision"
+    late: ClassVar[bool] = True  # its layout grows: declared on the program of the others
 
     def __post_init__(self) -> None:
         self.layout = self.layout.union(Layout.needed(self.pm, self.self_pairs, self.env_pairs))
@@ -176,7 +177,7 @@ class CollisionTerm(Term):
         held_p = nlp.parameter("collision.held", len(links))
         held = {k: held_p[m] for m, k in enumerate(links)}
         cap = nlp.parameter("collision.self_cap", len(self._self_rows))
-        local = ctx.kin.forward(ca.SX.zeros(3), ca.SX.eye(3), ctx.joints)
+        local = ctx.base_frame_state()
         blocks: list[Block] = []
         s = 0
         for k, (_, slots) in enumerate(self._self_rows):

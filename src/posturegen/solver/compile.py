@@ -203,12 +203,30 @@ def symbolic(program: Compilable) -> _Program:
     return _PROGRAMS.get_or_make(program.key()[:3], lambda: _declare(program))
 
 
+# the program of the terms declared first (Term.late: the others come after), per robot and
+# their keys: a problem whose collision rows grow declares only them again
+_EARLY: BoundedCache[BuildContext] = BoundedCache("programs without the late terms", CACHE_SIZE)
+
+
 def _declare(program: Compilable) -> _Program:
     """Every term declares its pieces; the program's vectors, functions and layout."""
-    nlp = NLP()
-    ctx = BuildContext(robot=program.robot, nlp=nlp, kin=program.robot.kinematics)
-    for term in program.terms():
+    terms = program.terms()
+    early = [t for t in terms if not t.late]
+    late = [t for t in terms if t.late]
+    if terms != [*early, *late]:
+        raise SolveError("a program's late terms (Term.late) must come after the others")
+
+    def make() -> BuildContext:
+        ctx = BuildContext(robot=program.robot, nlp=NLP(), kin=program.robot.kinematics)
+        for term in early:
+            term.declare(ctx)
+        return ctx
+
+    key = (program.key()[0], tuple(t.key() for t in early))
+    ctx = _EARLY.get_or_make(key, make).extended()
+    for term in late:
         term.declare(ctx)
+    nlp = ctx.nlp
     if program.elastic is not None:
         soften(nlp, program.elastic)
     x = ca.vertcat(*[v[0] for v in nlp.x.values()])

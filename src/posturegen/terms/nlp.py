@@ -9,10 +9,11 @@ instance."""
 
 from __future__ import annotations
 
+import dataclasses
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, ClassVar, Protocol
 
 import casadi as ca
 import numpy as np
@@ -102,6 +103,14 @@ class NLP:
         """An expression evaluated at the solution (torques, world points...)."""
         self.outputs[name] = ca.vec(ca.SX(expr))
 
+    def copy(self) -> NLP:
+        """A copy whose blocks can be added to without touching this one (the expressions,
+        immutable, are shared)."""
+        out = NLP()
+        for name in ("x", "p", "g", "derivatives", "costs", "outputs"):
+            setattr(out, name, dict(getattr(self, name)))
+        return out
+
 
 @dataclass
 class BuildContext:
@@ -117,12 +126,31 @@ class BuildContext:
     # (joint id, world point (3,), world force on the robot (3,)) of every force-bearing point
     force_points: list[tuple[int, ca.SX, ca.SX]] = field(default_factory=list)
     torques: ca.SX | None = None  # (nj,) actuated joint torques, set by the equilibrium
+    # the joint placements in the base's frame (fixed base at the origin), made once for a
+    # context and its extensions (the list is shared)
+    _base_frame: list[KinematicState] = field(default_factory=list)
+
+    def base_frame_state(self) -> KinematicState:
+        """The joint placements with the base at the origin: what distances between links
+        (which the base pose does not change) are computed in."""
+        if not self._base_frame:
+            self._base_frame.append(self.kin.forward(ca.SX.zeros(3), ca.SX.eye(3), self.joints))
+        return self._base_frame[0]
+
+    def extended(self) -> BuildContext:
+        """A copy that declares into a copy of the program (see :meth:`NLP.copy`)."""
+        return dataclasses.replace(self, nlp=self.nlp.copy(), force_points=list(self.force_points))
 
 
 class Term(ABC):
-    """Something that adds variables, constraints or costs to the posture problem."""
+    """Something that adds variables, constraints or costs to the posture problem.
+
+    A term whose structure changes from one solve of a problem to the next (the collision
+    rows: their layout grows) is ``late``: it is declared after every other term, on a copy of
+    their program, which is built once for all its variants."""
 
     name: str
+    late: ClassVar[bool] = False
 
     @abstractmethod
     def key(self) -> tuple[Any, ...]:
