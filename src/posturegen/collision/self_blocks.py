@@ -133,10 +133,9 @@ def block_functions(n: int) -> dict[str, ca.Function]:
 
 
 def _arguments(state: Any, block: Block) -> list[Any]:
-    return [state.p[block.a], state.R[block.a], state.p[block.b], state.R[block.b]] + [
-        block.slots,
-        block.clearance,
-    ]
+    """The block's function arguments: its links' poses in ``state``, its slots, clearance."""
+    a, b = block.a, block.b
+    return [state.p[a], state.R[a], state.p[b], state.R[b], block.slots, block.clearance]
 
 
 def _row_weights(us: list[Any], cap: Any) -> tuple[Any, Any]:
@@ -185,7 +184,7 @@ def _derivatives(
     jac_rows = []
     H = ca.SX(nz, nz)
     curv: dict[tuple[int, int], Any] = {}
-    weights: dict[int, list[Any]] = {L: [ca.SX.zeros(3), ca.SX.zeros(3, 3)] for L in links}
+    weights: dict[int, tuple[Any, Any]] = {L: (ca.SX.zeros(3), ca.SX.zeros(3, 3)) for L in links}
     for k, cap in enumerate(caps):
         mine = [m for m, b in enumerate(blocks) if b.row == k]
         _, W = _row_weights([first[m][0] for m in mine], cap)
@@ -199,12 +198,12 @@ def _derivatives(
             for key, C in (((b.a, b.a), Caa), ((b.a, b.b), Cab), ((b.b, b.b), Cbb)):
                 curv[key] = curv.get(key, 0) + c * C
             for L, w, G in ((b.a, wa, Ga), (b.b, wb, Gb)):
-                weights[L][0] = weights[L][0] + c * w[0:3]
-                weights[L][1] = weights[L][1] + c * G
+                F0, G0 = weights[L]
+                weights[L] = (F0 + c * w[0:3], G0 + c * G)
     for (La, Lb), M in curv.items():
         part = J[La].T @ M @ J[Lb]
         H = H + (part if La == Lb else part + part.T)
-    Hk = kinematic_hessian({L: (F, G) for L, (F, G) in weights.items()}, state, J, z)
+    Hk = kinematic_hessian(weights, state, J, z)
     if Hk is not None:
         H = H + Hk
     jac = ca.vertcat(*jac_rows) if jac_rows else ca.SX(0, nz)
