@@ -8,6 +8,7 @@ from __future__ import annotations
 import copy
 import importlib
 
+import casadi as ca
 import numpy as np
 import pinocchio as pin
 import yaml
@@ -20,6 +21,7 @@ from posturegen.collision.soft_min import ENV_SATURATION, SOFT_MIN_BETA
 from posturegen.collision.stance_hold import held_clearance
 from posturegen.solver.problem import Program
 from posturegen.solver.solve import configuration_from_x
+from posturegen.terms.nlp import NLP, BuildContext
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
 solve_module = importlib.import_module("posturegen.solver.solve")
@@ -167,3 +169,26 @@ def test_a_structures_later_problems_reuse_its_solver(monkeypatch):
         assert all(r.success for r in results), [r.message for r in results]
         builds.append(sum(r.build_time_s > 0 for r in results))
     assert builds[0] > 0 and builds[-1] == 0, builds
+
+
+def test_late_rows_stand_where_their_term_stands():
+    """The collision term is declared on a cached program of the other terms (Term.late), yet
+    its blocks take its place in Program.terms(): the program equals one declared term after
+    term (IPOPT's path follows the row order: with the collision rows last, HRP-2's vertical
+    ladder failed at 'left foot on rung 2')."""
+    program = _solved_program(_problem([0.3, -0.3, 0.8]))
+    assert program.collision_term is not None and program.terms()[-1] is not program.collision_term
+    ctx = BuildContext(robot=program.robot, nlp=NLP(), kin=program.robot.kinematics)
+    for term in program.terms():
+        term.declare(ctx)
+    compiled = program.compile()
+    assert list(compiled.g_index) == list(ctx.nlp.g)
+    assert list(compiled.x_index) == list(ctx.nlp.x)
+    assert list(compiled.p_index) == list(ctx.nlp.p)
+    x0, p, _, _ = program.numeric(compiled)
+    x = ca.vertcat(*[v[0] for v in ctx.nlp.x.values()])
+    g = ca.vertcat(*[v[0] for v in ctx.nlp.g.values()])
+    fresh = ca.Function("g", [x, ca.vertcat(*ctx.nlp.p.values())], [g])
+    np.testing.assert_array_equal(
+        np.array(fresh(x0, p)).ravel(), np.array(compiled.nlp(x0, p)[1]).ravel()
+    )

@@ -210,23 +210,21 @@ _EARLY: BoundedCache[BuildContext] = BoundedCache("programs without the late ter
 
 def _declare(program: Compilable) -> _Program:
     """Every term declares its pieces; the program's vectors, functions and layout."""
-    terms = program.terms()
-    early = [t for t in terms if not t.late]
-    late = [t for t in terms if t.late]
-    if terms != [*early, *late]:
-        raise SolveError("a program's late terms (Term.late) must come after the others")
+    terms = list(enumerate(program.terms()))
 
-    def make() -> BuildContext:
-        ctx = BuildContext(robot=program.robot, nlp=NLP(), kin=program.robot.kinematics)
-        for term in early:
+    def declare(ctx: BuildContext, which: list[tuple[int, Term]]) -> BuildContext:
+        for position, term in which:
+            ctx.nlp.declaring = position
             term.declare(ctx)
         return ctx
 
-    key = (program.key()[0], tuple(t.key() for t in early))
-    ctx = _EARLY.get_or_make(key, make).extended()
-    for term in late:
-        term.declare(ctx)
-    nlp = ctx.nlp
+    def make() -> BuildContext:
+        ctx = BuildContext(robot=program.robot, nlp=NLP(), kin=program.robot.kinematics)
+        return declare(ctx, [(i, t) for i, t in terms if not t.late])
+
+    key = (program.key()[0], tuple((i, t.key()) for i, t in terms if not t.late))
+    ctx = declare(_EARLY.get_or_make(key, make).extended(), [(i, t) for i, t in terms if t.late])
+    nlp = ctx.nlp.ordered()  # the late terms' blocks where their terms stand
     if program.elastic is not None:
         soften(nlp, program.elastic)
     x = ca.vertcat(*[v[0] for v in nlp.x.values()])

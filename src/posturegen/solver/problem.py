@@ -214,9 +214,9 @@ class Program:
             ConfigurationTerm(),
             *self.problem.contacts,
             *self.problem.tasks,
+            *extra,
             StaticEquilibrium(),
             *self.problem.costs,
-            *extra,
         ]
 
     def key(self) -> tuple[Any, ...]:

@@ -50,11 +50,18 @@ class NLP:
         self.derivatives: dict[str, BlockDerivatives | Callable[[], BlockDerivatives]] = {}
         self.costs: dict[str, ca.SX] = {}
         self.outputs: dict[str, ca.SX] = {}
+        # (kind, name) -> the position of the term that declared the block (see ordered)
+        self.rank: dict[tuple[str, str], int] = {}
+        self.declaring = 0  # the position of the term declaring now
+
+    def _own(self, kind: str, name: str) -> None:
+        self.rank.setdefault((kind, name), self.declaring)
 
     def variable(self, name: str, n: int, lb: ArrayLike = -np.inf, ub: ArrayLike = np.inf) -> ca.SX:
         """Declare n variables with (constant) bounds."""
         if name in self.x:
             raise SolveError(f"variable block '{name}' declared twice")
+        self._own("x", name)
         sym = ca.SX.sym(name, n)
         self.x[name] = (
             sym,
@@ -67,6 +74,7 @@ class NLP:
         """Declare n parameters, given numerically at each solve."""
         if name in self.p:
             raise SolveError(f"parameter block '{name}' declared twice")
+        self._own("p", name)
         self.p[name] = ca.SX.sym(name, n)
         return self.p[name]
 
@@ -83,6 +91,7 @@ class NLP:
         (called only when a solver is built from the expressions)."""
         if name in self.g:
             raise SolveError(f"constraint block '{name}' declared twice")
+        self._own("g", name)
         expr = ca.vec(ca.SX(expr))
         n = expr.shape[0]
         if derivatives is not None:
@@ -97,18 +106,31 @@ class NLP:
 
     def minimize(self, name: str, expr: ca.SX) -> None:
         """Add a scalar term to the cost."""
+        self._own("costs", name)
         self.costs[name] = self.costs.get(name, 0) + expr
 
     def output(self, name: str, expr: ca.SX) -> None:
         """An expression evaluated at the solution (torques, world points...)."""
+        self._own("outputs", name)
         self.outputs[name] = ca.vec(ca.SX(expr))
 
     def copy(self) -> NLP:
         """A copy whose blocks can be added to without touching this one (the expressions,
         immutable, are shared)."""
         out = NLP()
-        for name in ("x", "p", "g", "derivatives", "costs", "outputs"):
+        for name in ("x", "p", "g", "derivatives", "costs", "outputs", "rank"):
             setattr(out, name, dict(getattr(self, name)))
+        return out
+
+    def ordered(self) -> NLP:
+        """A copy whose blocks are in the order of the terms that declared them (then of
+        declaration): the program does not depend on which terms were declared first."""
+        out = self.copy()
+        kinds = {"derivatives": "g"}
+        for kind in ("x", "p", "g", "derivatives", "costs", "outputs"):
+            blocks = getattr(self, kind)
+            rank = {n: self.rank.get((kinds.get(kind, kind), n), 0) for n in blocks}
+            setattr(out, kind, {n: blocks[n] for n in sorted(blocks, key=rank.__getitem__)})
         return out
 
 
@@ -147,7 +169,8 @@ class Term(ABC):
 
     A term whose structure changes from one solve of a problem to the next (the collision
     rows: their layout grows) is ``late``: it is declared after every other term, on a copy of
-    their program, which is built once for all its variants."""
+    their program, which is built once for all its variants; its blocks then take their place
+    in the term order (:meth:`NLP.ordered`)."""
 
     name: str
     late: ClassVar[bool] = False
