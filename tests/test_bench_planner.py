@@ -10,7 +10,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from posturegen.bench_planner import PassStats, PlannerReport
-from posturegen.bench_reach import MARGIN, MU, PLANNER_FAMILIES, _ReachSampler, varied_stance
+from posturegen.bench_reach import (
+    MARGIN,
+    MU,
+    PLANNER_FAMILIES,
+    STANCES_CALL_ITER,
+    _ReachSampler,
+    varied_stance,
+)
 from posturegen.bench_table import HEADER, results_table, write_markdown
 from posturegen.cli import main
 from posturegen.errors import InputError
@@ -44,6 +51,9 @@ def test_reach_families_are_the_same_problems_with_and_without_collision():
         assert a.collision_options is None or not a.collision_options.self_collision
         assert b.collision_options.self_collision and b.collision_options.margin == MARGIN
         assert [c.mu for c in b.contacts] == [MU, MU]
+        assert a.solver_options.max_call_iter is None is b.solver_options.max_call_iter
+    for p in PLANNER_FAMILIES["talos-stances-collision"][1](2, 0):  # bounded as a planner's
+        assert p.solver_options.max_call_iter == STANCES_CALL_ITER
 
 
 @settings(max_examples=50, deadline=None)

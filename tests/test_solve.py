@@ -318,3 +318,45 @@ def test_one_problem_solved_from_two_threads_gives_the_serial_results():
         assert r.success, r.message
         np.testing.assert_array_equal(r.q, serial.q)
         assert r.iterations == serial.iterations
+
+
+def test_a_call_budget_starts_no_run_once_spent(monkeypatch, result):
+    """options.solver.max_call_iter bounds a whole call: runs that stop at max_iter are
+    followed by continuations (collision-free, torque-relaxed), but not once the call's
+    iterations are spent; the failure says why. A budget not reached changes nothing, and it
+    is not part of the structure (the demo's compiled program serves it)."""
+    import sys
+
+    solve_module = sys.modules["posturegen.solver.solve"]
+    runs: list[int] = []
+    run_ipopt = solve_module._run_ipopt
+
+    def counted(*args, **kwargs):
+        runs.append(1)
+        return run_ipopt(*args, **kwargs)
+
+    monkeypatch.setattr(solve_module, "_run_ipopt", counted)
+    data = copy.deepcopy(STAND)
+    data["options"]["self_collision"] = True
+    data["options"]["solver"] = {"max_iter": 3}
+    unbounded = solve(problem_from_dict(data))
+    assert not unbounded.success and len(runs) > 1
+    runs.clear()
+    data["options"]["solver"]["max_call_iter"] = 3
+    bounded = solve(problem_from_dict(data))
+    assert not bounded.success and len(runs) == 1 and bounded.iterations == 3
+    assert "max_call_iter" in bounded.message
+    data = copy.deepcopy(STAND)
+    data["options"]["solver"] = {"max_call_iter": 1000}
+    roomy = solve(problem_from_dict(data))
+    assert roomy.success and roomy.build_time_s == 0.0
+    assert roomy.iterations == result.iterations
+    np.testing.assert_array_equal(roomy.q, result.q)
+
+
+@pytest.mark.parametrize("value", [0, -1, 2.5, True, "10"])
+def test_a_bad_call_budget_is_a_one_line_error(value):
+    data = copy.deepcopy(STAND)
+    data["options"]["solver"] = {"max_call_iter": value}
+    with pytest.raises(posturegen.InputError, match="options.solver.max_call_iter"):
+        problem_from_dict(data)

@@ -295,23 +295,29 @@ def _costs(value: Any) -> list[Term]:
     return out
 
 
+def _positive_int(value: Any, fld: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise InputError(fld, f"expected a positive integer, got {value!r}", "write e.g. 200")
+    return value
+
+
 def _solver_options(value: Any) -> SolverOptions:
     v = F.require_mapping(value, "options.solver")
-    F.check_keys(v, "options.solver", [], ["tol", "max_iter", "max_cpu_time", "print_level", "jit"])
+    F.check_keys(
+        v,
+        "options.solver",
+        [],
+        ["tol", "max_iter", "max_call_iter", "max_cpu_time", "print_level", "jit"],
+    )
     jit = v.get("jit", False)
     if not isinstance(jit, bool):
         raise InputError("options.solver.jit", f"expected true or false, got {jit!r}", "write true")
     base = SolverOptions()
-    max_iter = v.get("max_iter", base.max_iter)
-    if isinstance(max_iter, bool) or not isinstance(max_iter, int) or max_iter < 1:
-        raise InputError(
-            "options.solver.max_iter",
-            f"expected a positive integer, got {max_iter!r}",
-            "write e.g. 200",
-        )
+    call = v.get("max_call_iter")
     return SolverOptions(
         tol=F.number(v.get("tol", base.tol), "options.solver.tol", positive=True),
-        max_iter=max_iter,
+        max_iter=_positive_int(v.get("max_iter", base.max_iter), "options.solver.max_iter"),
+        max_call_iter=None if call is None else _positive_int(call, "options.solver.max_call_iter"),
         max_cpu_time=F.number(
             v.get("max_cpu_time", base.max_cpu_time), "options.solver.max_cpu_time", positive=True
         ),

@@ -55,6 +55,11 @@ class SolverOptions:
     # inertia is wrong (None: IPOPT's 1e-4 and 100)
     first_hessian_perturbation: float | None = None
     perturb_inc_fact_first: float | None = None
+    # the whole call's IPOPT iterations (every run of one solve: active-set rounds,
+    # continuations): once spent no run starts, and the call fails saying so; a planner's
+    # bound on a stance that cannot be held. None: unbounded. Not part of the structure (two
+    # problems that differ only by it share their compiled program).
+    max_call_iter: int | None = field(default=None, compare=False)
 
     def ipopt(self) -> dict[str, Any]:
         """The options dict passed to casadi.nlpsol."""

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -80,6 +81,28 @@ class Result:
 
 
 @dataclass
+class _Budget:
+    """The IPOPT iterations one call of :func:`solve` may spend (SolverOptions.max_call_iter)
+    and has spent: each run is charged; once spent, no run starts."""
+
+    limit: int | None
+    spent: int = 0
+
+    def left(self) -> bool:
+        return self.limit is None or self.spent < self.limit
+
+
+# the budget of the solve running in this thread (or task); outside a solve, unbounded
+_BUDGET: ContextVar[_Budget | None] = ContextVar("posturegen_call_budget", default=None)
+
+
+def _budget_left() -> bool:
+    """True while the running call may start another IPOPT run."""
+    budget = _BUDGET.get()
+    return budget is None or budget.left()
+
+
+@dataclass
 class _Run:
     """One IPOPT run: its solution and what it cost."""
 
@@ -135,6 +158,9 @@ def _run_ipopt(
         )
         wall = time.perf_counter() - t0
         stats = compiled.solver.stats()
+    budget = _BUDGET.get()
+    if budget is not None:
+        budget.spent += int(stats.get("iter_count", 0))
     return _Run(
         program=program,
         compiled=compiled,
@@ -242,6 +268,15 @@ def solve(problem: Problem, x0: np.ndarray | None = None, start: Solved | None =
     nearest solution): without collision avoidance its multipliers too (IPOPT's warm start,
     SolverOptions.warm_start), else its variables, the active-set loop's own barrier
     parameter then (COLLISION_MU_INIT). The continuations start from its variables."""
+    token = _BUDGET.set(_Budget(problem.solver_options.max_call_iter))
+    try:
+        return _solve(problem, x0, start)
+    finally:
+        _BUDGET.reset(token)
+
+
+def _solve(problem: Problem, x0: np.ndarray | None, start: Solved | None) -> Result:
+    """:func:`solve` within its call's budget."""
     x_start = None if x0 is None else np.asarray(x0, dtype=float)
     program = Program.of(problem)
     first, duals = program, None
@@ -250,6 +285,8 @@ def solve(problem: Problem, x0: np.ndarray | None = None, start: Solved | None =
     result, runs = _solve_continued(first, x_start, [], duals)
     effort = problem.robot.effort_limit
     if result.success or result.status in _IPOPT_OK or not np.any(np.isfinite(effort)):
+        return result
+    if not _budget_left():
         return result
     relaxed = program.but(torque_limit_scale=program.torque_limit_scale * TORQUE_CONTINUATION)
     _, relaxed_runs = _solve_continued(relaxed, x_start, runs)
@@ -288,6 +325,8 @@ def _solve_continued(
     # active at once); its solution then starts the full program. On the inclined ladder
     # (HRP-2, left foot to step 2): 355 iterations, infeasible; 22 without collisions, then
     # 264 from there, verified.
+    if not _budget_left():
+        return result, runs
     relaxed = _run_ipopt(program.but(collision_options=None), x_start)
     if relaxed.status not in _IPOPT_OK:
         return result, [*runs, relaxed]
@@ -330,6 +369,8 @@ def _solve_avoiding(
         if result.success or loop.runs[-1].status not in _IPOPT_OK:
             return result, [*prior, *loop.runs]
         if not any(c.name.startswith("collision") for c in result.verification.failures):
+            return result, [*prior, *loop.runs]
+        if not _budget_left():
             return result, [*prior, *loop.runs]
         loop.margin += 0.01  # the proxies passed but a mesh did not: tighten and retry
     return result, [*prior, *loop.runs]  # type: ignore[return-value]
@@ -375,6 +416,8 @@ class _Loop:
             scan = active.scan(self.q_check, self.margin, near=not self.runs)
             if self.runs and not (scan.violated_self or scan.violated_env):
                 return  # no candidate outside the active set is violated
+            if self.runs and not _budget_left():
+                return  # the call's budget is spent: the re-check says what is violated
             active.grow(scan)
             term = active.term(self.margin)
             run = self._run(term)
@@ -399,7 +442,7 @@ class _Loop:
         layout = self.runs[-1].compiled.x_index
         run = _run_ipopt(program, self.x_warm, self.runs[-1].lam_x, lam, layout=layout)
         self.runs.append(run)
-        if run.status in _IPOPT_OK:
+        if run.status in _IPOPT_OK or not _budget_left():
             return run
         cold = dataclasses.replace(self.cold_run, mu_init=RETRY_MU_INIT)
         run = _run_ipopt(program.but(solver_options=cold), self.x_warm, layout=layout)
@@ -452,6 +495,12 @@ def _result(program: Program, runs: list[_Run], margin: float | None = None) -> 
     status = run.status
     success = status in _IPOPT_OK and report.ok
     message = _message(status, report)
+    budget = _BUDGET.get()
+    if not success and budget is not None and not budget.left():
+        message = (
+            f"the call's {budget.limit} IPOPT iterations (options.solver.max_call_iter) were "
+            f"spent: {message}"
+        )
     iterations = sum(r.iterations for r in runs)
     solve_time = sum(r.solve_time_s for r in runs)
     add_solve_fields(posture, success, status, message, iterations, solve_time, len(runs), report)
