@@ -257,3 +257,9 @@ def test_a_problem_files_stance_walks_to_a_frame_goal(tmp_path):
     assert np.linalg.norm(q[:3] - point) <= 0.08
     held = {c["robot_patch"]["name"] for c in last["contacts"]}
     assert {"left_sole", "right_sole"} <= held
+
+
+def test_a_bad_posture_budget_is_one_line(tmp_path, capsys):
+    code = main(["plan", "stairs", "--budget-iter", "0", "--out", str(tmp_path)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "budget.posture_iterations" in err and "\n" not in err

@@ -154,6 +154,15 @@ def plan(
     a scene has defaults); ``workers`` > 1 solves sibling transitions on the batch pool."""
     seq, start_stage, scene_name = _source(source, robot, steps)
     budget = budget or Budget()
+    if budget.posture_iterations is not None:
+        if budget.posture_iterations < 1:
+            got = budget.posture_iterations
+            raise InputError("budget.posture_iterations", f"{got} < 1", "give at least 1 or None")
+        options = seq.setdefault("options", {})
+        options["solver"] = {
+            **(options.get("solver") or {}),
+            "max_call_iter": budget.posture_iterations,
+        }
     data, problem = _start_problem(seq, start_stage)
     the_goal, the_rules = _inputs(seq, scene_name, problem, goal, rules)
     with RoundSolver(workers) as solver:

@@ -55,7 +55,9 @@ def summary_lines(report: PlanReport, out: Path) -> list[str]:
 
 def cmd_plan(args: argparse.Namespace) -> int:
     """posturegen plan SCENE_OR_PROBLEM --goal GOAL --out DIR"""
-    budget = Budget(nodes=args.budget_nodes, seconds=args.budget_s)
+    budget = Budget(
+        nodes=args.budget_nodes, seconds=args.budget_s, posture_iterations=args.budget_iter
+    )
     out = Path(args.out)
     report = plan(
         args.source,
@@ -89,6 +91,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--steps", type=int, help="size of a shipped scene (as for climb)")
     p.add_argument("--budget-nodes", type=int, default=Budget.nodes, help="transitions tried")
     p.add_argument("--budget-s", type=float, default=Budget.seconds, help="wall time [s]")
+    p.add_argument(
+        "--budget-iter",
+        type=int,
+        default=Budget.posture_iterations,
+        help="IPOPT iterations of one posture, all its runs (default: unbounded)",
+    )
     p.add_argument("--workers", type=int, default=1, help="processes solving sibling nodes")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=cmd_plan)

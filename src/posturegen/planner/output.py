@@ -73,7 +73,11 @@ def plan_summary(
         "robot": seq["robot"] if isinstance(seq["robot"], str) else "custom",
         "goal": dict(goal),
         "rules": dict(rules),
-        "budget": {"nodes": budget.nodes, "seconds": budget.seconds},
+        "budget": {
+            "nodes": budget.nodes,
+            "seconds": budget.seconds,
+            "posture_iterations": budget.posture_iterations,
+        },
         "reached": stats.reached,
         "stop": stats.stop,
         "transitions_tried": stats.tried,

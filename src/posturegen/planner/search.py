@@ -35,10 +35,14 @@ MAX_HOLDS = 1  # postures kept per place (stance and the cells of its contacts)
 
 @dataclass(frozen=True)
 class Budget:
-    """The search stops after ``nodes`` transitions tried or ``seconds`` [s] of wall time."""
+    """The search stops after ``nodes`` transitions tried or ``seconds`` [s] of wall time;
+    ``posture_iterations``: each posture's IPOPT iterations, all its runs (the stages'
+    options.solver.max_call_iter; None: unbounded), so that a stance that cannot be held
+    fails fast."""
 
     nodes: int = 60
     seconds: float = 1800.0
+    posture_iterations: int | None = None
 
 
 @dataclass
