@@ -61,6 +61,13 @@ def number(
     return x
 
 
+def integer(value: Any, field: str, minimum: int, fix: str) -> int:
+    """An integer (not a bool) >= minimum; ``fix``: the hint of the error."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise InputError(field, f"expected an integer >= {minimum}, got {value!r}", fix)
+    return value
+
+
 def angle(value: Any, field: str) -> float:
     """A finite angle [rad]; beyond a turn it is most likely degrees: a warning."""
     x = number(value, field)

@@ -72,9 +72,7 @@ def _friction(value: Any, field: str) -> FrictionModel:
             f"unknown friction model '{kind}'",
             with_hint(kind, ("pyramid", "cone"), "use pyramid or cone"),
         )
-    faces = v.get("faces", 4)
-    if isinstance(faces, bool) or not isinstance(faces, int) or faces < 3:
-        raise InputError(f"{field}.faces", f"expected an integer >= 3, got {faces!r}", "use 4 or 8")
+    faces = F.integer(v.get("faces", 4), f"{field}.faces", 3, "use 4 or 8")
     return FrictionModel(kind, faces)
 
 
@@ -191,9 +189,7 @@ def _geometric(c: Any, fld: str, k: _Common) -> Contact:
 
 
 def _support(c: Any, fld: str, k: _Common) -> Contact:
-    n = c.get("points", 8)
-    if isinstance(n, bool) or not isinstance(n, int) or n < 4:
-        raise InputError(f"{fld}.points", f"expected an integer >= 4, got {n!r}", "use 8")
+    n = F.integer(c.get("points", 8), f"{fld}.points", 4, "use 8")
     ell = _ellipse_options(c, fld)
     return SupportContact(
         k.name,
@@ -295,12 +291,6 @@ def _costs(value: Any) -> list[Term]:
     return out
 
 
-def _positive_int(value: Any, fld: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise InputError(fld, f"expected a positive integer, got {value!r}", "write e.g. 200")
-    return value
-
-
 def _solver_options(value: Any) -> SolverOptions:
     v = F.require_mapping(value, "options.solver")
     F.check_keys(
@@ -316,8 +306,12 @@ def _solver_options(value: Any) -> SolverOptions:
     call = v.get("max_call_iter")
     return SolverOptions(
         tol=F.number(v.get("tol", base.tol), "options.solver.tol", positive=True),
-        max_iter=_positive_int(v.get("max_iter", base.max_iter), "options.solver.max_iter"),
-        max_call_iter=None if call is None else _positive_int(call, "options.solver.max_call_iter"),
+        max_iter=F.integer(
+            v.get("max_iter", base.max_iter), "options.solver.max_iter", 1, "write e.g. 200"
+        ),
+        max_call_iter=None
+        if call is None
+        else F.integer(call, "options.solver.max_call_iter", 1, "write e.g. 300"),
         max_cpu_time=F.number(
             v.get("max_cpu_time", base.max_cpu_time), "options.solver.max_cpu_time", positive=True
         ),

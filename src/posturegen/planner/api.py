@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .. import _fields as F
 from ..climb.sequence import SequenceReport, stage_problem_dict
 from ..errors import InputError
 from ..io.problem_file import problem_from_dict, read_yaml
@@ -155,9 +156,7 @@ def plan(
     seq, start_stage, scene_name = _source(source, robot, steps)
     budget = budget or Budget()
     if budget.posture_iterations is not None:
-        if budget.posture_iterations < 1:
-            got = budget.posture_iterations
-            raise InputError("budget.posture_iterations", f"{got} < 1", "give at least 1 or None")
+        F.integer(budget.posture_iterations, "budget.posture_iterations", 1, "give 1 or more")
         options = seq.setdefault("options", {})
         options["solver"] = {
             **(options.get("solver") or {}),

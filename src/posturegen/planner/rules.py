@@ -151,10 +151,7 @@ def _patch_rule(value: Any, fld: str, base: PatchRule | None) -> PatchRule:
 
 
 def _count(v: Mapping[str, Any], key: str, default: int) -> int:
-    x = v.get(key, default)
-    if isinstance(x, bool) or not isinstance(x, int) or x < 1:
-        raise InputError(f"rules.{key}", f"expected an integer >= 1, got {x!r}", "write e.g. 2")
-    return x
+    return F.integer(v.get(key, default), f"rules.{key}", 1, "write e.g. 2")
 
 
 def parse_rules(value: Any, defaults: Rules) -> Rules:

@@ -158,10 +158,7 @@ def _run_ipopt(
         )
         wall = time.perf_counter() - t0
         stats = compiled.solver.stats()
-    budget = _BUDGET.get()
-    if budget is not None:
-        budget.spent += int(stats.get("iter_count", 0))
-    return _Run(
+    run = _Run(
         program=program,
         compiled=compiled,
         x=np.array(sol["x"]).ravel(),
@@ -174,6 +171,10 @@ def _run_ipopt(
         lam_x=np.array(sol["lam_x"]).ravel(),
         lam_g=np.array(sol["lam_g"]).ravel(),
     )
+    budget = _BUDGET.get()
+    if budget is not None:
+        budget.spent += max(run.iterations, 0)
+    return run
 
 
 def _per_block(run: _Run) -> dict[str, np.ndarray]:

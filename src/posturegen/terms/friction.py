@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from .. import _fields as F
 from ..errors import InputError
 
 FRICTION_KINDS = ("pyramid", "cone")
@@ -27,10 +28,7 @@ class FrictionModel:
                 f"unknown friction model {self.kind!r}",
                 f"use one of: {', '.join(FRICTION_KINDS)}",
             )
-        if isinstance(self.faces, bool) or not isinstance(self.faces, int) or self.faces < 3:
-            raise InputError(
-                "friction.faces", f"expected an integer >= 3, got {self.faces!r}", "use 4 or 8"
-            )
+        F.integer(self.faces, "friction.faces", 3, "use 4 or 8")
 
     def constraints(self, phi: ca.SX, mu: ca.SX) -> ca.SX:
         """Rows that must be <= 0 for local force φ = (f_t, f_n) (3,)."""
