@@ -5,8 +5,10 @@ smaller inradius of the robot patch and the surface) and the centre-of-pressure 
 from __future__ import annotations
 
 import copy
+from unittest import mock
 
 import numpy as np
+import pinocchio as pin
 import pytest
 import shapely
 from hypothesis import assume, given, settings
@@ -19,7 +21,7 @@ from posturegen.model.geometry import ConvexPolygon, intersect
 from posturegen.model.min_ellipse import MIN_RADIUS_FRACTION, default_min_radii, inscribed_disc
 from posturegen.terms.contacts import patch_in_surface, polygon_in_surface
 from posturegen.terms.cop import DEFAULT_COP_MARGIN
-from posturegen.verify import ellipse_depth, verify_posture
+from posturegen.verify import cop_shortfall, ellipse_depth, verify_posture
 from tests.test_contacts import step_problem
 
 GROUND = {"name": "ground", "vertices": [[-1, -1], [1, -1], [1, 1], [-1, 1]]}
@@ -235,3 +237,36 @@ def test_cop_margin_is_validated(change, field):
     with pytest.raises(InputError) as info:
         problem_from_dict(data)
     assert str(info.value).startswith(field)
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    P=convex_polygons(),
+    Q=convex_polygons(),
+    shift=st.tuples(st.floats(-0.2, 0.2), st.floats(-0.2, 0.2)),
+    point=st.tuples(st.floats(-0.4, 0.4), st.floats(-0.4, 0.4)),
+    margin=st.floats(0.001, 0.05),
+)
+def test_fixed_contact_cop_depth_is_the_intersections(P, Q, shift, point, margin):
+    """A fixed contact's CoP shortfall (no ellipse: the region is both polygons' intersection
+    at the realized pose) equals margin minus the depth in the intersection that shapely
+    computes, inside or outside, and inf when they do not meet; the patch frame is flipped
+    (normals opposite), so its polygon reaches the surface plane clockwise."""
+    T_ws = pin.SE3.Identity()
+    T_wc = pin.SE3(pin.utils.rpyToMatrix(np.pi, 0.0, 0.0), np.array([*shift, 0.0]))
+    patch_s = np.column_stack([Q.vertices, np.zeros(Q.n)]) @ T_wc.rotation.T + T_wc.translation
+    contact = {"cop_margin": margin, "forces": [{"point": [*point, 0.0], "force": [0, 0, 2.0]}]}
+    got = cop_shortfall(contact, T_ws, P, T_wc, Q, weight=1.0)
+    region = intersect(ConvexPolygon(patch_s[:, :2]), P)
+    if region is None:
+        assert got == np.inf
+        return
+    depth = float(region.distance_inside(np.array([point]))[0])
+    assert got == pytest.approx(margin - depth, abs=1e-9)
+    if depth > 1e-5:  # well inside: read off both polygons, the intersection never built
+        with mock.patch("posturegen.verify.intersect", side_effect=AssertionError("built")):
+            assert cop_shortfall(contact, T_ws, P, T_wc, Q, weight=1.0) == got
+    shapely_region = shapely.intersection(P.to_shapely(), shapely.Polygon(patch_s[:, :2]))
+    if shapely_region.contains(shapely.Point(point)):
+        inside = shapely_region.exterior.distance(shapely.Point(point))
+        assert got == pytest.approx(margin - inside, abs=1e-9)

@@ -225,28 +225,33 @@ def _check_forces(
     worst: _Worst,
 ) -> None:
     """Each force's point on both polygons, its friction cone, and its Jᵀf in ``residual``."""
+    forces = contact.get("forces") or []
+    if not forces:
+        return
     mu = float(contact["mu"])
     n = f.T_ws.rotation[:, 2]
-    for force in contact.get("forces", []):
-        p_w = np.asarray(force["point"], dtype=float)
-        f_w = np.asarray(force["force"], dtype=float)
-        # the point must lie on both polygons: in the surface plane and inside both
-        p_s = _poly_in_plane(f.T_ws, p_w[None])[0]
-        p_c = _poly_in_plane(f.T_wc, p_w[None])[0]
-        worst.geometry = max(worst.geometry, abs(p_s[2]))
-        worst.inside = max(
-            worst.inside,
-            float(-f.P_s.distance_inside(p_s[None, :2])[0]),
-            float(-f.P_c.distance_inside(p_c[None, :2])[0]),
-        )
-        fn = float(n @ f_w)
-        ft = float(np.linalg.norm(f_w - fn * n))
-        worst.friction = max(worst.friction, (ft - mu * fn) / weight, -fn / weight)
-        # generalized force of f at p: Jᵀ f with J the point's LOCAL_WORLD_ALIGNED Jacobian
-        jid = model.frames[model.getFrameId(force["frame"])].parentJoint
-        J = pin.getJointJacobian(model, data, jid, pin.LOCAL_WORLD_ALIGNED)
-        lever = p_w - data.oMi[jid].translation
-        residual += J[:3].T @ f_w + J[3:].T @ np.cross(lever, f_w)
+    p_w = np.array([force["point"] for force in forces], dtype=float)  # (k, 3) [m]
+    f_w = np.array([force["force"] for force in forces], dtype=float)  # (k, 3) [N]
+    # the points must lie on both polygons: in the surface plane and inside both
+    p_s = _poly_in_plane(f.T_ws, p_w)
+    p_c = _poly_in_plane(f.T_wc, p_w)
+    worst.geometry = max(worst.geometry, float(np.abs(p_s[:, 2]).max()))
+    worst.inside = max(
+        worst.inside,
+        float(-f.P_s.distance_inside(p_s[:, :2]).min()),
+        float(-f.P_c.distance_inside(p_c[:, :2]).min()),
+    )
+    fn = f_w @ n  # (k,) [N]
+    ft = np.linalg.norm(f_w - np.outer(fn, n), axis=1)
+    worst.friction = max(worst.friction, float(np.max(ft - mu * fn)) / weight)
+    worst.friction = max(worst.friction, float(np.max(-fn)) / weight)
+    # generalized forces Σ Jᵀ f at p: J the point's LOCAL_WORLD_ALIGNED Jacobian, per joint
+    joints = np.array([model.frames[model.getFrameId(x["frame"])].parentJoint for x in forces])
+    for jid in np.unique(joints):
+        on = joints == jid
+        J = pin.getJointJacobian(model, data, int(jid), pin.LOCAL_WORLD_ALIGNED)  # (6, nv)
+        torque = np.cross(p_w[on] - data.oMi[int(jid)].translation, f_w[on]).sum(axis=0)
+        residual += J[:3].T @ f_w[on].sum(axis=0) + J[3:].T @ torque
 
 
 def _inclusive_outside(contact: dict[str, Any], f: _ContactFrames) -> float:
@@ -395,11 +400,25 @@ def cop_shortfall(
         depth = ellipse_depth(cop, centre, (a1, a2))
     else:
         v_w = np.column_stack([P_c.vertices, np.zeros(P_c.n)]) @ T_wc.rotation.T + T_wc.translation
-        region = intersect(ConvexPolygon(_poly_in_plane(T_ws, v_w)[:, :2]), P_s)
-        if region is None:
-            return np.inf
-        depth = float(region.distance_inside(cop[None])[0])
+        patch_s = _poly_in_plane(T_ws, v_w)[:, :2]  # (n, 2) the patch in the surface plane
+        depth = min(float(P_s.distance_inside(cop[None])[0]), _ring_depth(patch_s, cop))
+        if depth < TOL_GEOMETRY:  # outside or at the border: the intersection itself (or none)
+            region = intersect(ConvexPolygon(patch_s), P_s)
+            if region is None:
+                return np.inf
+            depth = float(region.distance_inside(cop[None])[0])
     return (margin - depth) * min(1.0, total / (COP_FULL_LOAD * weight))
+
+
+def _ring_depth(ring: np.ndarray, point: np.ndarray) -> float:
+    """min_i of the signed distance [m] of ``point`` (2,) to the line of edge i of the convex
+    ring (n, 2) (either orientation), > 0 inside. Inside two convex polygons, the smaller of
+    both is the distance to the border of their intersection (a ball about the point lies in
+    the intersection iff it lies in every half-plane of both)."""
+    edge = np.roll(ring, -1, axis=0) - ring  # (n, 2)
+    turn = np.sign(np.sum(ring[:, 0] * edge[:, 1] - ring[:, 1] * edge[:, 0]))  # +1: ccw
+    cross = edge[:, 0] * (point[1] - ring[:, 1]) - edge[:, 1] * (point[0] - ring[:, 0])
+    return float(np.min(turn * cross / np.linalg.norm(edge, axis=1)))
 
 
 def ellipse_depth(

@@ -40,6 +40,9 @@ def cache_dir() -> Path:
 # bending (IPOPT infeasible at every margin; verified with 1 or 2 cm)
 SLIDE = 0.01
 GROUP = 16  # spheres per group of the broad phase (a joint's spheres split by their extent)
+# [m] added to a run's bounding radius: its world mean moves with rounding (1e-16 m) that
+# the radius, computed once in the joint's frame, does not follow
+BOUND_PAD = 1e-9
 
 
 @dataclass(frozen=True)
@@ -103,6 +106,10 @@ class ProxyModel:
         self._gp_link = np.concatenate(link) if link else np.zeros(0, dtype=int)
         self._gp_start = np.searchsorted(self._gp_link, np.arange(len(self.joint_pairs) + 1))
         self._index = {(int(a), int(b)): k for k, (a, b) in enumerate(self.joint_pairs)}
+        self._joint_runs = _Runs.of(self._joint_start, self._joints, self._local, self._radii)
+        self._group_runs = _Runs.of(
+            self._group_start, np.arange(len(sizes)), self._local, self._radii
+        )
 
     def pair_clearance(self, margin: float) -> np.ndarray:
         """(P,) [m] how far apart each candidate joint pair is held: min(margin, clearance),
@@ -132,25 +139,42 @@ class ProxyModel:
         world. Joint pairs, then pairs of groups, whose bounding spheres are farther apart
         than the slack (a lower bound of every distance between their spheres) are skipped."""
         k = np.arange(len(self.joint_pairs)) if links is None else np.asarray(links, dtype=int)
-        jc, jr = _bounds(centers, self._radii, self._joint_start, self._joints)
+        jc, jr = self._joint_runs.bounds(centers)
         a, b = self.joint_pairs[k, 0], self.joint_pairs[k, 1]
         gap = np.linalg.norm(jc[a] - jc[b], axis=1) - jr[a] - jr[b]
         k = k[gap < slack[k]]  # the joint pairs that pass
         first, count = self._gp_start[k], self._gp_start[k + 1] - self._gp_start[k]
         gp = np.arange(count.sum()) + np.repeat(first - (np.cumsum(count) - count), count)
-        gc, gr = _bounds(centers, self._radii, self._group_start, np.arange(len(self._members)))
+        gc, gr = self._group_runs.bounds(centers)
         ga, gb, link = self._ga[gp], self._gb[gp], self._gp_link[gp]
         gap = np.linalg.norm(gc[ga] - gc[gb], axis=1) - gr[ga] - gr[gb]
         ok = gap < slack[link]  # the group pairs that pass
         ga, gb, link = ga[ok], gb[ok], link[ok]
-        i = np.repeat(self._members[ga], GROUP, axis=1).ravel()  # (n·GROUP²,)
-        j = np.tile(self._members[gb], GROUP).ravel()
-        link = np.repeat(link, GROUP * GROUP)
-        valid = (i >= 0) & (j >= 0)
-        i, j, link = i[valid], j[valid], link[valid]
+        # each sphere against the other group's bounding sphere, then the pairs of survivors
+        ma, mb = self._members[ga], self._members[gb]  # (n, GROUP), -1: no sphere
+        near_a = self._near_bound(centers, ma, gc[gb], gr[gb], slack[link])
+        near_b = self._near_bound(centers, mb, gc[ga], gr[ga], slack[link])
+        row, s, t = np.nonzero(near_a[:, :, None] & near_b[:, None, :])
+        i, j, link = ma[row, s], mb[row, t], link[row]
         d = self.distances(centers, i, j)
         keep = d < slack[link]
         return Close(i[keep], j[keep], link[keep], d[keep])
+
+    def _near_bound(
+        self,
+        centers: np.ndarray,
+        members: np.ndarray,
+        bound_c: np.ndarray,
+        bound_r: np.ndarray,
+        slack: np.ndarray,
+    ) -> np.ndarray:
+        """(n, GROUP) which spheres of each row's group ``members`` (n, GROUP) are closer than
+        ``slack`` (n,) [m] to the row's other group's bounding sphere (centre (n, 3), radius
+        (n,)): a lower bound of their distance to each sphere of that group."""
+        valid = members >= 0
+        u = centers[members] - bound_c[:, None, :]  # (n, GROUP, 3)
+        gap = np.sqrt(np.einsum("nkj,nkj->nk", u, u)) - self._radii[members] - bound_r[:, None]
+        return valid & (gap < slack[:, None])
 
     def distances(self, centers: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
         """Distances |c_i - c_j| - r_i - r_j [m] of sphere pairs (indices i, j)."""
@@ -159,10 +183,11 @@ class ProxyModel:
 
     def links_of(self, excluded: set[tuple[int, int]] | frozenset[tuple[int, int]]) -> np.ndarray:
         """Indices of the candidate joint pairs that are not ``excluded`` (sorted ids)."""
-        return np.array(
-            [i for i, (a, b) in enumerate(self.joint_pairs) if (int(a), int(b)) not in excluded],
-            dtype=int,
-        )
+        if not excluded:
+            return np.arange(len(self.joint_pairs))
+        gone = np.array(sorted(excluded), dtype=int).reshape(-1, 2)
+        kept = ~_rows_in(self.joint_pairs, gone)
+        return np.flatnonzero(kept)
 
     @property
     def centers_local(self) -> np.ndarray:
@@ -188,23 +213,46 @@ def closest(close: Close, per_link: int) -> Close:
     return close.take(order[np.arange(len(link)) - first < per_link])
 
 
-def _bounds(
-    centers: np.ndarray, radii: np.ndarray, start: np.ndarray, which: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """World centres and radii of spheres bounding the runs start[w]:start[w + 1] of the
-    spheres, for w in ``which`` (indexed by w; other rows unused): the mean of their centres
-    and the farthest sphere from it."""
-    n = len(start) - 1
-    mean = np.zeros((n, 3))
-    radius = np.zeros(n)
-    which = np.asarray(which, dtype=int)
-    which = which[start[which + 1] > start[which]]
-    sums = np.add.reduceat(centers, start[which], axis=0)
-    mean[which] = sums / (start[which + 1] - start[which])[:, None]
-    owner = np.repeat(which, start[which + 1] - start[which])
-    rows = np.concatenate([np.arange(start[w], start[w + 1]) for w in which])
-    np.maximum.at(radius, owner, np.linalg.norm(centers[rows] - mean[owner], axis=1) + radii[rows])
-    return mean, radius
+@dataclass(frozen=True)
+class _Runs:
+    """Bounding spheres of runs of spheres (a joint's, a group's: each run on one joint).
+    A run's radius is that of its local centres, rigid with the joint: the mean of its world
+    centres and the same radius (plus BOUND_PAD for rounding) bound it at every posture."""
+
+    starts: np.ndarray  # (m,) first sphere of each non-empty run
+    which: np.ndarray  # (m,) its run index
+    counts: np.ndarray  # (m,) its number of spheres
+    radius: np.ndarray  # (n,) [m] each run's radius (0 for the empty ones)
+
+    @classmethod
+    def of(
+        cls, start: np.ndarray, which: np.ndarray, local: np.ndarray, radii: np.ndarray
+    ) -> _Runs:
+        """The runs start[w]:start[w + 1] for w in ``which`` of the local centres (S, 3)."""
+        which = np.asarray(which, dtype=int)
+        which = which[start[which + 1] > start[which]]
+        counts = start[which + 1] - start[which]
+        radius = np.zeros(len(start) - 1)
+        for w in which:
+            c = local[start[w] : start[w + 1]]
+            spread = np.linalg.norm(c - c.mean(axis=0), axis=1) + radii[start[w] : start[w + 1]]
+            radius[w] = spread.max() + BOUND_PAD
+        return cls(start[which], which, counts, radius)
+
+    def bounds(self, centers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World centres (n, 3) and radii (n,) [m] of the runs for sphere centres (S, 3) in
+        world (rows of empty runs unused)."""
+        mean = np.zeros((len(self.radius), 3))
+        if len(self.which):
+            sums = np.add.reduceat(centers, self.starts, axis=0)
+            mean[self.which] = sums / self.counts[:, None]
+        return mean, self.radius
+
+
+def _rows_in(rows: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """(n,) whether each row (a, b) of ``rows`` (n, 2) of ints is a row of ``table`` (m, 2)."""
+    width = int(max(rows.max(initial=0), table.max(initial=0))) + 1
+    return np.isin(rows[:, 0] * width + rows[:, 1], table[:, 0] * width + table[:, 1])
 
 
 def _grouped(spheres: list[Sphere]) -> list[list[int]]:

@@ -34,7 +34,6 @@ program, and a structure's layout grows over its solves until its problems stop 
 
 from __future__ import annotations
 
-from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -44,7 +43,6 @@ import numpy as np
 from .._cache import BoundedCache, Ref
 from ..terms.nlp import BuildContext, Instance, Term
 from .boxes import EnvBox
-from .pairs import joint_pair
 from .proxies import ProxyModel
 from .self_blocks import SELF_SLOT_BLOCK, Block, self_block_rows
 from .soft_min import ENV_SATURATION, Element, Point, box_element, center, soft_min_rows
@@ -71,6 +69,14 @@ def _blocks(count: int, block: int) -> int:
     return -(-count // block) * block
 
 
+def _counts(a: np.ndarray, b: np.ndarray, block: int) -> tuple[tuple[int, int, int], ...]:
+    """The sorted (a, b, n) of the distinct pairs of (a, b) (each (k,) ints), n their count
+    rounded up to whole blocks."""
+    pairs, n = np.unique(np.column_stack([a, b]), axis=0, return_counts=True)
+    rows = zip(pairs.tolist(), n.tolist(), strict=True)
+    return tuple((x, y, _blocks(c, block)) for (x, y), c in rows)
+
+
 @dataclass(frozen=True)
 class Layout:
     """The structure of a program's collision rows, which the pairs held fill:
@@ -92,12 +98,11 @@ class Layout:
     ) -> Layout:
         """The smallest layout (whole blocks) that holds these sphere pairs."""
         joint = pm.joint_ids
-        selfs = Counter(joint_pair(int(joint[i]), int(joint[j])) for i, j in self_pairs)
-        envs = Counter((int(joint[i]), int(k)) for i, k in env_pairs)
-        return cls(
-            tuple(sorted((a, b, _blocks(n, SELF_SLOT_BLOCK)) for (a, b), n in selfs.items())),
-            tuple(sorted((j, k, _blocks(n, ENV_SLOT_BLOCK)) for (j, k), n in envs.items())),
-        )
+        sp = np.array(self_pairs, dtype=int).reshape(-1, 2)
+        ja, jb = joint[sp[:, 0]], joint[sp[:, 1]]
+        selfs = _counts(np.minimum(ja, jb), np.maximum(ja, jb), SELF_SLOT_BLOCK)
+        ep = np.array(env_pairs, dtype=int).reshape(-1, 2)
+        return cls(selfs, _counts(joint[ep[:, 0]], ep[:, 1], ENV_SLOT_BLOCK))
 
     def union(self, other: Layout) -> Layout:
         """The layout with the slots of both (the larger count of each)."""
@@ -321,10 +326,16 @@ def _self_fill(
     on joint a first."""
     joint = pm.joint_ids
     out: dict[tuple[int, int], list[tuple[int, int]]] = {}
-    for i, j in sorted(self_pairs):
-        a, b = int(joint[i]), int(joint[j])
-        pair = (i, j) if a < b else (j, i)
-        out.setdefault(joint_pair(a, b), []).append(pair)
+    if not self_pairs:
+        return out
+    ij = np.array(sorted(self_pairs), dtype=int)  # (k, 2)
+    a, b = joint[ij[:, 0]], joint[ij[:, 1]]
+    swap = ~(a < b)  # the sphere on the smaller joint first
+    first = np.where(swap, ij[:, 1], ij[:, 0]).tolist()
+    second = np.where(swap, ij[:, 0], ij[:, 1]).tolist()
+    lo, hi = np.minimum(a, b).tolist(), np.maximum(a, b).tolist()
+    for x, y, i, j in zip(lo, hi, first, second, strict=True):
+        out.setdefault((x, y), []).append((i, j))
     return out
 
 
