@@ -354,6 +354,26 @@ def test_a_call_budget_starts_no_run_once_spent(monkeypatch, result):
     np.testing.assert_array_equal(roomy.q, result.q)
 
 
+def test_a_run_uses_only_what_is_left_of_the_call_budget():
+    """A run starts with the budget's remainder as its max_iter (rounded up to BUDGET_STEP):
+    the stances family's problem 28 (narrow yawed stance, the knees pressed together) spends
+    hundreds of iterations unbounded; with a budget of 40 the call stops within 40 +
+    BUDGET_STEP - 1, where a run allowed its whole max_iter (200) would not."""
+    import dataclasses
+
+    from posturegen.bench_reach import stances_family
+    from posturegen.solver.solve import BUDGET_STEP
+
+    problem = list(stances_family(29, 0))[28]
+    problem.solver_options = dataclasses.replace(
+        problem.solver_options, max_call_iter=40, codegen="off"
+    )
+    assert problem.solver_options.max_iter > 40 + BUDGET_STEP
+    result = solve(problem)
+    assert not result.success and "max_call_iter" in result.message
+    assert 40 <= result.iterations <= 40 + BUDGET_STEP - 1
+
+
 @pytest.mark.parametrize("value", [0, -1, 2.5, True, "10"])
 def test_a_bad_call_budget_is_a_one_line_error(value):
     data = copy.deepcopy(STAND)

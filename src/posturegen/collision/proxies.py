@@ -233,10 +233,12 @@ class _Runs:
         which = which[start[which + 1] > start[which]]
         counts = start[which + 1] - start[which]
         radius = np.zeros(len(start) - 1)
-        for w in which:
-            c = local[start[w] : start[w + 1]]
-            spread = np.linalg.norm(c - c.mean(axis=0), axis=1) + radii[start[w] : start[w + 1]]
-            radius[w] = spread.max() + BOUND_PAD
+        if len(which):
+            mean = np.add.reduceat(local, start[which], axis=0) / counts[:, None]
+            rows = np.concatenate([np.arange(start[w], start[w + 1]) for w in which])
+            spread = np.linalg.norm(local[rows] - np.repeat(mean, counts, axis=0), axis=1)
+            top = np.maximum.reduceat(spread + radii[rows], np.cumsum(counts) - counts)
+            radius[which] = top + BOUND_PAD
         return cls(start[which], which, counts, radius)
 
     def bounds(self, centers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -343,10 +345,36 @@ def proxy_model(robot: Robot) -> ProxyModel:
         (a, b) for i, a in enumerate(joints) for b in joints[i + 1 :] if rule.reason(a, b) is None
     ]
     joint_pairs = np.array(pairs, dtype=int).reshape(-1, 2)
-    clearance = reference_clearance(model, spheres, joint_pairs, rule.reference_q)
+    clearance = _stored_clearance(robot, spheres, joint_pairs, rule.reference_q)
     pm = ProxyModel(spheres, joint_pairs, clearance, rule, limbs(model), report)
     robot._proxy_model = pm
     return pm
+
+
+def _stored_clearance(
+    robot: Robot, spheres: list[Sphere], joint_pairs: np.ndarray, q: np.ndarray
+) -> np.ndarray:
+    """:func:`reference_clearance`, cached on disk beside the proxies (a process's first
+    collision call: Talos 0.1 s), keyed on them, the pairs, q and this module's source."""
+    h = hashlib.sha1(_cache_key(robot).encode())
+    for part in (joint_pairs.tobytes(), np.asarray(q, dtype=float).tobytes()):
+        h.update(part)
+    h.update(Path(__file__).read_bytes())
+    h.update(np.array([[*s.center, s.radius, s.joint_id] for s in spheres]).tobytes())
+    path = cache_dir() / f"clearance-{h.hexdigest()[:16]}.npy"
+    try:
+        stored = np.load(path)
+        if stored.shape == (len(joint_pairs),) and np.all(np.isfinite(stored)):
+            return stored
+    except (OSError, ValueError):
+        pass  # not stored yet, or a broken file: compute it
+    clearance = reference_clearance(robot.model, spheres, joint_pairs, q)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.save(path, clearance)
+    except OSError:
+        pass  # a read-only cache: compute it next time
+    return clearance
 
 
 def reference_clearance(

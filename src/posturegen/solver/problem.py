@@ -56,9 +56,10 @@ class SolverOptions:
     first_hessian_perturbation: float | None = None
     perturb_inc_fact_first: float | None = None
     # the whole call's IPOPT iterations (every run of one solve: active-set rounds,
-    # continuations): once spent no run starts, and the call fails saying so; a planner's
-    # bound on a stance that cannot be held. None: unbounded. Not part of the structure (two
-    # problems that differ only by it share their compiled program).
+    # continuations): a run may use only what is left (rounded up to 25), and once spent no
+    # run starts and the call fails saying so; a planner's bound on a stance that cannot be
+    # held. None: unbounded. Not part of the structure (two problems that differ only by it
+    # share their compiled program; a run cut short builds a variant with a smaller max_iter).
     max_call_iter: int | None = field(default=None, compare=False)
 
     def ipopt(self) -> dict[str, Any]:

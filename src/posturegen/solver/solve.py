@@ -91,6 +91,18 @@ class _Budget:
     def left(self) -> bool:
         return self.limit is None or self.spent < self.limit
 
+    def run_cap(self, max_iter: int) -> int:
+        """The next run's iteration limit: ``max_iter``, or what is left of the budget rounded
+        up to a multiple of BUDGET_STEP when less (a few solver variants per structure, not
+        one per count), so that a call spends at most its budget + BUDGET_STEP - 1."""
+        if self.limit is None:
+            return max_iter
+        left = max(self.limit - self.spent, 1)
+        return min(max_iter, -(-left // BUDGET_STEP) * BUDGET_STEP)
+
+
+# [iterations] a run's limit under a call's budget: what is left, rounded up to this
+BUDGET_STEP = 25
 
 # the budget of the solve running in this thread (or task); outside a solve, unbounded
 _BUDGET: ContextVar[_Budget | None] = ContextVar("posturegen_call_budget", default=None)
@@ -131,6 +143,11 @@ def _run_ipopt(
     ``x0``, the problem's initial guess with ``joints0`` (nj,) for the joints when given.
     ``layout``: the variable blocks of ``x0`` and ``lam_x0`` when they may differ from this
     program's (an elastic program's collision slacks grow with the active set)."""
+    budget = _BUDGET.get()
+    options = program.solver_options
+    cap = options.max_iter if budget is None else budget.run_cap(options.max_iter)
+    if cap < options.max_iter:  # the call's budget ends within this run
+        program = program.but(solver_options=dataclasses.replace(options, max_iter=cap))
     built_before = is_compiled(program)
     compiled = program.compile()
     with compiled.lock:
@@ -171,7 +188,6 @@ def _run_ipopt(
         lam_x=np.array(sol["lam_x"]).ravel(),
         lam_g=np.array(sol["lam_g"]).ravel(),
     )
-    budget = _BUDGET.get()
     if budget is not None:
         budget.spent += max(run.iterations, 0)
     return run
