@@ -65,6 +65,14 @@ def test_varied_stances_are_in_their_ranges(seed):
     assert abs(yaw_l) <= 0.15 and abs(yaw_r) <= 0.15
 
 
+def test_the_stances_family_draws_no_stance_whose_feet_intersect():
+    """Seed 0 meets two such stances in its first 150 (narrow, toes turned in): drawn again."""
+    from posturegen.bench_reach import stances_family
+    from posturegen.collision.active_set import placed_blocked
+
+    assert all(placed_blocked(p) is None for p in stances_family(150, 0))
+
+
 def _stats(median: float, verified: int = 10) -> PassStats:
     return PassStats(10, verified, median, 2 * median, 3 * median, median / 2, 12, 20, 10, 0, ())
 

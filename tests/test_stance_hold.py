@@ -93,3 +93,28 @@ def test_a_stance_without_fixed_contacts_has_no_caps():
     assert placed_pairs(problem) == frozenset()
     pm = proxy_model(problem.robot)
     assert np.array_equal(held_clearance(problem, pm, MARGIN), pm.pair_clearance(MARGIN))
+
+
+def test_a_stance_whose_fixed_feet_intersect_fails_at_once_saying_so():
+    """Feet 15 cm apart, toes turned 0.15 rad inward: the contacts place the feet's meshes
+    into each other, which no posture can undo. The call fails after one run without the
+    collision rows (before: the whole budget spent tightening the margin), its message names
+    the pair, and the re-check agrees (the mesh check fails on it). Left unchecked at the
+    user's request, the same stance is not blocked."""
+    import dataclasses
+
+    from posturegen.collision.active_set import placed_blocked
+
+    problem = _problem(([0.0, 0.075], [0.0, -0.075], -0.15, 0.15), [0.4, -0.3, 0.9], True)
+    why = placed_blocked(problem)
+    assert why is not None and "leg_left_6_link_0/leg_right_6_link_0" in why
+    result = solve(problem)
+    assert not result.success
+    assert result.message.startswith(why) and result.posture["message"] == result.message
+    assert result.iterations <= 40 and result.posture["ipopt_runs"] == 1
+    failed = {c.name: c.detail for c in result.verification.failures}
+    assert "leg_left_6_link_0/leg_right_6_link_0" in failed["collision: self (meshes)"]
+    feet = (("leg_left_6_joint", "leg_right_6_joint"),)
+    excluded = dataclasses.replace(problem.collision_options, exclude=feet)
+    assert placed_blocked(dataclasses.replace(problem, collision_options=excluded)) is None
+    assert placed_blocked(_problem(CLIFF, [0.4, -0.3, 0.9], True)) is None

@@ -19,7 +19,7 @@ import pinocchio as pin
 from shapely.geometry import MultiPoint, Point
 
 from .bench import _RIGHT_REACH
-from .collision.active_set import ActiveSet
+from .collision.active_set import ActiveSet, placed_blocked
 from .io.problem_file import problem_from_dict
 from .model.robot import Robot, load_bundled
 from .solver.problem import Problem
@@ -147,10 +147,14 @@ def stances_family(n: int, seed: int) -> Iterator[Problem]:
     """Varied stances (:func:`varied_stance`) with right-gripper targets near the body
     (x 0.10-0.30, y -0.10-0.10, z 0.85-1.15 m) and far (x 0.25-0.50, y -0.50 to -0.10,
     z 0.70-1.10 m), alternately; self-collision avoided; each call bounded to
-    STANCES_CALL_ITER IPOPT iterations."""
+    STANCES_CALL_ITER IPOPT iterations. A stance whose feet's meshes intersect has no
+    posture (solve says so at once: placed_blocked) and is drawn again (seed 0: 2 of the
+    first 150, narrow with the toes turned in)."""
     rng = np.random.default_rng(seed)
     for i in range(n):
         feet = varied_stance(rng)
+        while placed_blocked(_problem(feet, [0.3, 0.0, 1.0], True)) is not None:
+            feet = varied_stance(rng)  # feet whose meshes intersect: no posture, drawn again
         if i % 2 == 0:
             t = [rng.uniform(0.1, 0.3), rng.uniform(-0.1, 0.1), rng.uniform(0.85, 1.15)]
         else:

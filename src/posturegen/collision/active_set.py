@@ -21,6 +21,7 @@ from .._cache import BoundedCache, Ref
 from ..model.kinematics import scratch_data
 from ..terms.contacts import FixedContact
 from .boxes import CollisionOptions, EnvBox, env_boxes, excluded_joint_ids, row_box_distances
+from .mesh_check import placed_intersections
 from .proxies import Close, ProxyModel, closest, proxy_model
 from .rows import CollisionTerm, Layout
 from .stance_hold import stance_caps
@@ -216,6 +217,32 @@ def placed_pairs(problem: Any) -> frozenset[tuple[int, int]]:
     re-checked (posturegen.verify): a stance whose feet intersect fails there."""
     joints = sorted({c.patch.joint_id for c in problem.contacts if isinstance(c, FixedContact)})
     return frozenset((a, b) for i, a in enumerate(joints) for b in joints[i + 1 :])
+
+
+def placed_blocked(problem: Any) -> str | None:
+    """Why no posture of ``problem`` can pass the mesh self-collision check when its fixed
+    contacts place two links' meshes into each other (each link at T_world_target·
+    T_joint_patch⁻¹ of its contact), else None. Found before any IPOPT run: such a stance
+    (Talos, feet yawed toward each other 15 cm apart) used to spend the call's whole budget
+    tightening a margin that cannot move them."""
+    opts = problem.collision_options
+    if opts is None or not opts.self_collision:
+        return None
+    placed: dict[int, pin.SE3] = {}
+    for c in problem.contacts:
+        if isinstance(c, FixedContact):
+            placed.setdefault(c.patch.joint_id, c.T_world_target * c.patch.T_joint_patch.inverse())
+    robot = problem.robot
+    srdf = str(robot.srdf) if robot.srdf else None
+    user = frozenset(excluded_joint_ids(robot, opts))
+    hits = placed_intersections(robot.model, robot.collision_model(), srdf, placed, user)
+    if not hits:
+        return None
+    pairs = ", ".join(f"{name} {1000 * depth:.1f} mm" for depth, name in hits[:3])
+    return (
+        f"the fixed contacts place meshes into each other ({pairs} deep): no posture separates "
+        "them; move a contact, or leave the pair unchecked (options.collision_exclude)"
+    )
 
 
 def box_label(box: EnvBox) -> str:

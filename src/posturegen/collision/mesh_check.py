@@ -245,3 +245,54 @@ def _box_hits(
             depth = penetration_depth(convex_shape(obj), M, coal.Box(*size), T_box)
             out.append((max(depth, TOL_PENETRATION + MIN_DEPTH), f"{obj.name}/{box['name']}"))
     return out
+
+
+# per checked-pairs model: its geometry pairs by joint pair (sorted ids)
+_BY_JOINTS: BoundedCache[dict[tuple[int, int], list[tuple[int, int]]]] = BoundedCache(
+    "geometry pairs by joint pair", 16
+)
+# per model, pairs and placements: the intersecting pairs of the placed links
+_PLACED: BoundedCache[list[tuple[float, str]]] = BoundedCache("placed intersections", 256)
+
+
+def placed_intersections(
+    model: pin.Model,
+    geometry: pin.GeometryModel,
+    srdf: str | None,
+    placed: dict[int, pin.SE3],
+    user: frozenset[tuple[int, int]] = frozenset(),
+) -> list[tuple[float, str]]:
+    """(depth [m], "a/b") of each checked mesh pair between two joints that the contacts
+    place (joint id -> its world placement T_world_joint), intersecting there: no posture
+    moves one against the other, so such a stance cannot pass the self-collision check.
+    Cached on the placements (a planner's stances repeat)."""
+    if len(placed) < 2:
+        return []
+    gm, gd = _self_pairs_model(model, geometry, srdf, user)
+    joints = sorted(placed)
+    key = (Ref(gm), tuple((j, placed[j].homogeneous.tobytes()) for j in joints))
+
+    def make() -> list[tuple[float, str]]:
+        by_joints = _BY_JOINTS.get_or_make(Ref(gm), lambda: _pairs_by_joints(gm))
+        pairs = [
+            pair
+            for i, a in enumerate(joints)
+            for b in joints[i + 1 :]
+            for pair in by_joints.get((a, b), [])
+        ]
+        for g in {g for pair in pairs for g in pair}:
+            obj = gm.geometryObjects[g]
+            gd.oMg[g] = placed[obj.parentJoint] * obj.placement
+        return _pair_depths(gm, gd, pairs)
+
+    return _PLACED.get_or_make(key, make)
+
+
+def _pairs_by_joints(gm: pin.GeometryModel) -> dict[tuple[int, int], list[tuple[int, int]]]:
+    """The collision pairs of ``gm`` by the sorted pair of their objects' joints."""
+    out: dict[tuple[int, int], list[tuple[int, int]]] = {}
+    for cp in gm.collisionPairs:
+        a, b = gm.geometryObjects[cp.first], gm.geometryObjects[cp.second]
+        key = joint_pair(int(a.parentJoint), int(b.parentJoint))
+        out.setdefault(key, []).append((int(cp.first), int(cp.second)))
+    return out

@@ -17,7 +17,7 @@ import numpy as np
 import pinocchio as pin
 
 from .._cache import BoundedCache
-from ..collision.active_set import ActiveSet
+from ..collision.active_set import ActiveSet, placed_blocked
 from ..collision.rows import CollisionTerm
 from ..collision.separation import separated_start
 from ..io.posture_file import add_solve_fields, posture_dict, write_posture
@@ -334,6 +334,11 @@ def _solve_continued(
         lam_x0, lam_g0 = duals if duals is not None else (None, None)
         runs = [*prior, _run_ipopt(program, x_start, lam_x0, lam_g0)]
         return _result(program, runs), runs
+    blocked = placed_blocked(program)
+    if blocked is not None:  # no posture passes: one run without collision rows, and why
+        runs = [*prior, _run_ipopt(program.but(collision_options=None), x_start)]
+        result = _result(program, runs)
+        return (result if result.success else _explained(result, blocked)), runs
     result, runs = _solve_avoiding(program, x_start, prior)
     if result.success:
         return result, runs
@@ -477,6 +482,13 @@ def _message(status: str, report: VerifyReport) -> str:
         f"{c.name} {c.value:.3g} > {c.tolerance:.1g}" + (f" ({c.detail})" if c.detail else "")
         for c in report.failures
     )
+
+
+def _explained(result: Result, why: str) -> Result:
+    """The failed ``result`` with ``why`` leading its message (and its posture's)."""
+    message = f"{why} ({result.message})"
+    result.posture["message"] = message
+    return dataclasses.replace(result, message=message)
 
 
 def _started(
