@@ -72,9 +72,10 @@ def _blocks(count: int, block: int) -> int:
 def _counts(a: np.ndarray, b: np.ndarray, block: int) -> tuple[tuple[int, int, int], ...]:
     """The sorted (a, b, n) of the distinct pairs of (a, b) (each (k,) ints), n their count
     rounded up to whole blocks."""
-    pairs, n = np.unique(np.column_stack([a, b]), axis=0, return_counts=True)
-    rows = zip(pairs.tolist(), n.tolist(), strict=True)
-    return tuple((x, y, _blocks(c, block)) for (x, y), c in rows)
+    width = int(max(a.max(initial=0), b.max(initial=0))) + 1
+    keys, n = np.unique(a * width + b, return_counts=True)
+    rows = zip((keys // width).tolist(), (keys % width).tolist(), n.tolist(), strict=True)
+    return tuple((x, y, _blocks(c, block)) for x, y, c in rows)
 
 
 @dataclass(frozen=True)
@@ -138,26 +139,37 @@ class CollisionTerm(Term):
     late: ClassVar[bool] = True  # its layout grows: declared on the program of the others
 
     def __post_init__(self) -> None:
-        self.layout = self.layout.union(Layout.needed(self.pm, self.self_pairs, self.env_pairs))
-        self._self_rows = _self_rows(self.pm, self.layout)
+        key = (Ref(self.pm), self.self_pairs, self.env_pairs, self.layout)
+        fill = _FILLS.get_or_make(key, self._filled)
+        self.layout, self._self_rows, self._groups, self._self_slot_pairs, self._env_rows = fill[:5]
+        self._self_columns: np.ndarray = fill[5]
+
+    def _filled(self) -> tuple[Any, ...]:
+        """The layout grown to hold the pairs, its self rows, each row's sphere pairs, every
+        self slot's pair and every env slot's pair (None: free), in the rows' order, and the
+        self slots' parameters (read-only: shared by every term of these pairs)."""
+        layout = self.layout.union(Layout.needed(self.pm, self.self_pairs, self.env_pairs))
+        self_rows = _self_rows(self.pm, layout)
         fill = _self_fill(self.pm, self.self_pairs)
-        self._groups = [
+        groups = [
             (limb, [p for a, b, _ in slots for p in fill.get((a, b), [])])
-            for limb, slots in self._self_rows
+            for limb, slots in self_rows
         ]
-        # the sphere pairs of every self slot in the rows' order (None: free)
-        self._self_slot_pairs = [
+        slot_pairs = [
             pair
-            for _, slots in self._self_rows
+            for _, slots in self_rows
             for a, b, count in slots
             for pair in _padded(fill.get((a, b), []), count)
         ]
         env_fill = _env_fill(self.pm, self.env_pairs)
-        self._env_rows = [
+        env_rows = [
             pair
-            for joint, box, count in self.layout.env_slots
+            for joint, box, count in layout.env_slots
             for pair in _padded(env_fill.get((joint, box), []), count)
         ]
+        columns = _slot_columns(self.pm, slot_pairs, pair=True)
+        columns.flags.writeable = False
+        return layout, self_rows, groups, slot_pairs, env_rows, columns
 
     def key(self) -> tuple[Any, ...]:
         return ("collision", self.layout, len(self.boxes))
@@ -268,7 +280,7 @@ class CollisionTerm(Term):
     def _self_parameters(self) -> np.ndarray:
         """(7, slots) per slot: sphere a's centre, sphere b's centre (each in its joint's
         frame), r_a + r_b; a free slot: zeros and -DUMMY_GAP."""
-        return _slot_columns(self.pm, self._self_slot_pairs, pair=True)
+        return self._self_columns
 
     def _env_parameters(self) -> np.ndarray:
         """(4, slots) per slot: the sphere's centre in its joint's frame, its radius (a free
@@ -301,6 +313,9 @@ def _padded(items: list[Any], count: int) -> list[Any]:
     return [*items, *([None] * (count - len(items)))]
 
 
+# a term's filled layout per (proxy model, pairs held, layout given): an active set that
+# settled is held again by every call (CollisionTerm._filled)
+_FILLS: BoundedCache[tuple[Any, ...]] = BoundedCache("collision fills", 64)
 # the rows of a layout per (proxy model, layout); the model is held (Ref)
 _ROWS: BoundedCache[list[Any]] = BoundedCache("collision row groups", 64)
 
