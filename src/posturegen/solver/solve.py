@@ -277,8 +277,11 @@ def solve(problem: Problem, x0: np.ndarray | None = None, start: Solved | None =
     The pairs used are remembered per problem structure; the next problem of that structure
     starts with them. When IPOPT does not converge, two continuations follow: without the
     collision rows, then with the torque limits relaxed, each solution starting the real
-    program again. The Result counts every IPOPT run. Why a failure failed:
-    :func:`posturegen.solver.diagnose.diagnose`.
+    program again. A stance whose fixed contacts place two links' meshes into each other
+    cannot pass the mesh check: one run without collision rows, and the message says so
+    (:func:`posturegen.collision.active_set.placed_blocked`). ``max_call_iter`` bounds the
+    whole call, each run to what is left of it. The Result counts every IPOPT run. Why a
+    failure failed: :func:`posturegen.solver.diagnose.diagnose`.
 
     ``x0``: the variables to start from (this problem's layout); ``start``: a solved posture
     of the same robot to start from instead (:mod:`posturegen.solver.starts`; a planner's
