@@ -430,10 +430,7 @@ def ellipse_depth(
     t = np.linspace(0.0, 2 * np.pi, samples, endpoint=False)
     a1, a2 = axes
     v = centre + np.outer(np.cos(t), a1) + np.outer(np.sin(t), a2)  # (samples, 2)
-    edge = np.roll(v, -1, axis=0) - v
-    cross = edge[:, 0] * (point[1] - v[:, 1]) - edge[:, 1] * (point[0] - v[:, 0])
-    turn = np.sign(a1[0] * a2[1] - a1[1] * a2[0])  # +1: counter-clockwise
-    return float(np.min(turn * cross / np.linalg.norm(edge, axis=1)))
+    return _ring_depth(v, point)
 
 
 def verify_file(path: str | Path) -> VerifyReport:
