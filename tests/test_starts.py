@@ -103,3 +103,31 @@ def test_nearest_starts_picks_the_nearest_verified_solution(solved):
     other = problem_from_dict(data)
     assert other.key() != problem.key()
     assert starts.nearest(other) is None
+
+
+def test_a_start_with_multipliers_warm_starts_ipopt_from_its_own_barrier(solved, monkeypatch):
+    """The first run from a solved posture's multipliers is IPOPT's warm start from
+    START_WARM_MU_INIT (fewer iterations than the active-set rounds' 1e-5, measured); without
+    multipliers the barrier starts at START_MU_INIT."""
+    import posturegen.solver.solve as S
+    from posturegen.solver.starts import START_MU_INIT, START_WARM_MU_INIT
+
+    problem, result = solved
+    seen: list[dict] = []
+    run_ipopt = S._run_ipopt
+
+    def recording(program, *args, **kwargs):
+        run = run_ipopt(program, *args, **kwargs)
+        seen.append(run.compiled.ipopt_options)
+        return run
+
+    monkeypatch.setattr(S, "_run_ipopt", recording)
+    warm = solve(_problem([0.31, -0.29, 0.9]), start=result)
+    assert warm.success, warm.message
+    assert seen[0]["ipopt.warm_start_init_point"] == "yes"
+    assert seen[0]["ipopt.mu_init"] == START_WARM_MU_INIT != 1e-5
+    seen.clear()
+    primal = dataclasses.replace(result, lam_x=np.zeros(0), lam_g={})
+    assert solve(_problem([0.31, -0.29, 0.9]), start=primal).success
+    assert "ipopt.warm_start_init_point" not in seen[0]
+    assert seen[0]["ipopt.mu_init"] == START_MU_INIT

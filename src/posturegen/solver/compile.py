@@ -261,18 +261,25 @@ def numeric(
     program: Compilable, compiled: _Layout
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(x0, p, lbg, ubg) of this instance for a compiled structure."""
-    x0 = np.zeros(compiled.n_x)
+    x0 = initial_guess(program, compiled)
     p = np.zeros(sum(s.stop - s.start for s in compiled.p_index.values()))
     lbg, ubg = compiled.lbg.copy(), compiled.ubg.copy()
     for term in program.terms():
         for name, value in term.parameters(program).items():
             p[compiled.p_index[name]] = np.ravel(value, order="F")
-        for name, value in term.initial_guess(program).items():
-            x0[compiled.x_index[name]] = np.ravel(value, order="F")
         for name, (lb, ub) in term.bounds(program).items():
             lbg[compiled.g_index[name]] = lb
             ubg[compiled.g_index[name]] = ub
     return x0, p, lbg, ubg
+
+
+def initial_guess(program: Compilable, compiled: _Layout) -> np.ndarray:
+    """x0 (n_x,) of this instance for a compiled structure: every term's initial guess."""
+    x0 = np.zeros(compiled.n_x)
+    for term in program.terms():
+        for name, value in term.initial_guess(program).items():
+            x0[compiled.x_index[name]] = np.ravel(value, order="F")
+    return x0
 
 
 def summary(program: Compilable) -> str:

@@ -22,9 +22,9 @@ from ..collision.rows import CollisionTerm
 from ..collision.separation import separated_start
 from ..io.posture_file import add_solve_fields, posture_dict, write_posture
 from ..verify import VerifyReport, verify_posture
-from .compile import CompiledNLP, is_compiled, numeric, symbolic
+from .compile import CompiledNLP, initial_guess, is_compiled, symbolic
 from .problem import Problem, Program, SolverOptions
-from .starts import START_MU_INIT, Solved, carried, start_vector
+from .starts import START_MU_INIT, START_WARM_MU_INIT, Solved, carried, start_vector
 
 _IPOPT_OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
 
@@ -499,16 +499,17 @@ def _started(
 ) -> tuple[Program, np.ndarray, tuple[np.ndarray, dict[str, np.ndarray]] | None]:
     """The first program of a solve from ``start``, its variables laid out for it, and its
     multipliers when the program has no collision rows and the start has them (IPOPT's warm
-    start; else the barrier from START_MU_INIT unless the options set one)."""
+    start from START_WARM_MU_INIT; else the barrier from START_MU_INIT unless the options set
+    one)."""
     layout = symbolic(program)  # the variables' blocks (no solver built)
-    x_init = numeric(program, layout)[0]
+    x_init = initial_guess(program, layout)
     x = start_vector(program, x_init, layout.x_index, start)
     if program.collision_options is not None:
         return program, x, None
     options = program.solver_options
     if start.lam_x.size and start.lam_g:
         lam_x = carried(start.lam_x, start.x_blocks, layout.x_index, np.zeros_like(x))
-        warm = dataclasses.replace(options, warm_start=True)
+        warm = dataclasses.replace(options, warm_start=True, warm_mu_init=START_WARM_MU_INIT)
         return program.but(solver_options=warm), x, (lam_x, dict(start.lam_g))
     if options.mu_init is None:
         options = dataclasses.replace(options, mu_init=START_MU_INIT)

@@ -29,9 +29,12 @@ from .problem import Problem, Program
 # IPOPT's initial barrier parameter from a start without multipliers (measured on
 # talos-reach-balance-free, 40 problems, each started from the nearest of those solved before
 # it: 11 median iterations at IPOPT's 0.1, 9 at 1e-3, against 12 from the initial posture).
-# With the start's multipliers IPOPT warm-starts (SolverOptions.warm_start, barrier 1e-5):
-# 6 median iterations on 30 such problems (5 at 1e-6, 7 at 1e-4, 8 at 1e-3)
 START_MU_INIT = 1e-3
+# With the start's multipliers IPOPT warm-starts (SolverOptions.warm_start) from this barrier
+# parameter: on the nearest pass of talos-reach-balance-free (50 problems, seed 0), 5 median
+# iterations and 274 in all at 1e-6, against 6 and 346 at 1e-5 (the active-set rounds' own
+# warm starts keep 1e-5), 5 and 258 at 1e-7; all 50 verified each time
+START_WARM_MU_INIT = 1e-6
 STARTS_PER_STRUCTURE = 256  # solutions kept per problem structure (oldest dropped)
 
 
@@ -102,10 +105,11 @@ class NearestStarts:
         if not kept:
             return None
         f = features(problem)
-        fits = [
-            (float(np.linalg.norm(g - f)), i) for i, (g, _) in enumerate(kept) if g.shape == f.shape
-        ]
-        return kept[min(fits)[1]][1] if fits else None
+        same = [i for i, (g, _) in enumerate(kept) if g.shape == f.shape]
+        if not same:
+            return None
+        G = np.stack([kept[i][0] for i in same])  # (k, n) their features
+        return kept[same[int(np.argmin(np.linalg.norm(G - f, axis=1)))]][1]
 
     def __len__(self) -> int:
         return sum(len(v) for v in self._by_key.values())
