@@ -10,7 +10,13 @@ from hypothesis import strategies as st
 from posturegen.bench_reach import MARGIN, _problem
 from posturegen.collision.active_set import ActiveSet, placed_pairs
 from posturegen.collision.proxies import proxy_model
-from posturegen.collision.stance_hold import held_clearance, stance_posture, support_joints
+from posturegen.collision.stance_hold import (
+    CAP_REACH,
+    held_clearance,
+    stance_caps,
+    stance_posture,
+    support_joints,
+)
 from posturegen.solver.solve import solve
 from posturegen.terms.contacts import FixedContact
 
@@ -51,6 +57,31 @@ def test_the_stance_posture_stands_on_the_fixed_contacts(width, stagger, yaw_l, 
     }
     assert moved <= chain  # only the legs moved
     assert moved or _patch_error(problem, problem.q_init) < 1e-6
+
+
+@settings(max_examples=10, deadline=None)
+@given(
+    width=st.floats(0.15, 0.24),
+    stagger=st.floats(-0.04, 0.04),
+    yaw_l=st.floats(-0.15, 0.15),
+    yaw_r=st.floats(-0.15, 0.15),
+)
+def test_caps_within_their_reach_hold_as_caps_of_every_pair(width, stagger, yaw_l, yaw_r):
+    """The caps are searched only among pairs closer than CAP_REACH in the stance posture
+    (or the margin, when larger); the holds are those of caps searched over every pair, for
+    margins below and above CAP_REACH (30 cm: the legs' far pairs, held closer than at the
+    reference once the feet are yawed)."""
+    feet = ([stagger / 2, width / 2], [-stagger / 2, -width / 2], yaw_l, yaw_r)
+    problem = _problem(feet, [0.3, -0.3, 0.9], True)
+    pm = proxy_model(problem.robot)
+    every = stance_caps(problem, pm, reach=10.0)
+    near = stance_caps(problem, pm)
+    assert np.all(near >= every)
+    for margin in (0.002, 0.005, 0.025, CAP_REACH, 0.3):
+        held = np.minimum(pm.pair_clearance(margin), every)
+        np.testing.assert_array_equal(held_clearance(problem, pm, margin), held)
+        if margin <= CAP_REACH:
+            np.testing.assert_array_equal(np.minimum(pm.pair_clearance(margin), near), held)
 
 
 def test_holds_are_the_reference_rule_at_the_reference_stance_and_only_lower_elsewhere():

@@ -24,7 +24,7 @@ from .boxes import CollisionOptions, EnvBox, env_boxes, excluded_joint_ids, row_
 from .mesh_check import placed_intersections
 from .proxies import Close, ProxyModel, closest, proxy_model
 from .rows import CollisionTerm, Layout
-from .stance_hold import stance_caps
+from .stance_hold import CAP_REACH, stance_caps
 
 # the closest sphere pairs of each pair of links, and spheres of each link near each box, that
 # enter the program in one round: proxies fitted to 1 cm put thousands of sphere pairs within
@@ -95,7 +95,8 @@ class ActiveSet:
         if opts.self_collision:
             links = pm.links_of(frozenset(excluded_joint_ids(robot, opts)) | placed_pairs(problem))
         model = robot.model
-        caps = stance_caps(problem, pm) if len(links) else np.inf
+        reach = max(CAP_REACH, opts.largest_margin())  # every margin the loop tries
+        caps = stance_caps(problem, pm, reach) if len(links) else np.inf
         return cls(pm, links, env_boxes(problem), opts, model, scratch_data(model), caps=caps)
 
     @property

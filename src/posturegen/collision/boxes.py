@@ -20,6 +20,9 @@ BETA = 300.0  # [1/m] sharpness of the smooth max over box faces (the sphere-box
 MARGIN = 0.002  # [m] the default collision margin (see CollisionOptions)
 
 
+TIGHTEN_STEP = 0.01  # [m] each retry's margin grows by this (CollisionOptions.tighten)
+
+
 @dataclass(frozen=True)
 class CollisionOptions:
     """What to avoid: self-collisions (``self_collision``), and always the scene's boxes and
@@ -41,7 +44,11 @@ class CollisionOptions:
     # 16.8 at 2 cm (talos-near-body-collision: the pairs met later force re-solves)
     environment_activation: float = 0.03
     max_rounds: int = 6  # active-set rounds
-    tighten: int = 2  # retries with a 1 cm larger margin when the mesh check fails
+    tighten: int = 2  # retries with a TIGHTEN_STEP larger margin when the mesh check fails
+
+    def largest_margin(self) -> float:
+        """[m] the margin of the last retry."""
+        return self.margin + TIGHTEN_STEP * self.tighten
 
 
 @dataclass(frozen=True)

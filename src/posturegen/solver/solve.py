@@ -18,6 +18,7 @@ import pinocchio as pin
 
 from .._cache import BoundedCache
 from ..collision.active_set import ActiveSet, placed_blocked
+from ..collision.boxes import TIGHTEN_STEP
 from ..collision.rows import CollisionTerm
 from ..collision.separation import separated_start
 from ..io.posture_file import add_solve_fields, posture_dict, write_posture
@@ -397,7 +398,7 @@ def _solve_avoiding(
             return result, [*prior, *loop.runs]
         if not _budget_left():
             return result, [*prior, *loop.runs]
-        loop.margin += 0.01  # the proxies passed but a mesh did not: tighten and retry
+        loop.margin += TIGHTEN_STEP  # the proxies passed but a mesh did not: tighten, retry
     return result, [*prior, *loop.runs]  # type: ignore[return-value]
 
 
