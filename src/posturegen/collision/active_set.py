@@ -42,11 +42,15 @@ TOL_VIOLATION = 1e-6  # [m] a sphere-box pair this far below the margin is viola
 SELF_SLACK = 1e-3
 
 
-# near self pairs per (proxy model, posture, slack, links): a planner's queries start at one posture
-_NEAR: BoundedCache[frozenset[tuple[int, int]]] = BoundedCache("near self pairs", 64)
-# the self pairs below their threshold at a posture, for the first scan of a solve (its
-# initial posture, the same for a planner's queries); keyed like _NEAR
-_BELOW: BoundedCache[Close] = BoundedCache("self pairs below threshold", 64)
+# the self pairs closer than a slack at a posture, per (proxy model, posture's joints, slack,
+# links), for the first scan of a solve (its initial posture, the same for a planner's
+# queries): the violated ones and the near ones, each at the holds without a stance's caps
+_BELOW: BoundedCache[Close] = BoundedCache("self pairs below a slack", 64)
+
+
+def _within(close: Close, slack: np.ndarray) -> Close:
+    """The pairs of ``close`` closer than their joint pair's ``slack`` (P,) [m]."""
+    return close.take(close.d < slack[close.link])
 
 
 def violation_threshold(clearance: np.ndarray) -> np.ndarray:
@@ -117,9 +121,11 @@ class ActiveSet:
         pin.forwardKinematics(self.model, self.data, q)
         centers = self.pm.centers_world(self.model, self.data)
         out = Scan()
-        clearance = np.minimum(self.pm.pair_clearance(margin), self.caps)
+        reference = self.pm.pair_clearance(margin)  # (P,) [m] the holds without the caps
+        clearance = np.minimum(reference, self.caps)
         if len(self.links):
-            bad = self._below(q, centers, violation_threshold(clearance), cache=near)
+            slack = violation_threshold(clearance)
+            bad = self._below(q, centers, slack, violation_threshold(reference) if near else None)
             held = np.array(
                 [
                     (min(a, b), max(a, b)) in self.self_pairs
@@ -134,7 +140,10 @@ class ActiveSet:
             fresh = np.where(self._held_env(), np.inf, d_env)
             out.violated_env = self._env(fresh, margin - TOL_VIOLATION)
         if len(self.links) and (near or out.violated_self or out.violated_env):
-            out.near_self = self._near_self(q, centers, clearance + self.options.activation)
+            activation = self.options.activation
+            out.near_self = self._near_self(
+                q, centers, clearance + activation, reference + activation
+            )
         return out
 
     def term(self, margin: float) -> CollisionTerm:
@@ -157,11 +166,30 @@ class ActiveSet:
         pose, so the key holds q's joints only: stances placed differently share it."""
         return (Ref(self.pm), q[7:].tobytes(), slack.tobytes(), self.links.tobytes())
 
-    def _below(self, q: np.ndarray, centers: np.ndarray, slack: np.ndarray, cache: bool) -> Close:
-        """The candidate self pairs closer than ``slack`` (P,) [m] at q (centres (S, 3));
-        cached when ``cache`` (a solve's first posture)."""
-        if not cache:
+    def _below(
+        self, q: np.ndarray, centers: np.ndarray, slack: np.ndarray, wider: np.ndarray | None
+    ) -> Close:
+        """The candidate self pairs closer than ``slack`` (P,) [m] at q (centres (S, 3)).
+        With ``wider`` (P,) >= slack (a solve's first posture): those closer than ``wider``
+        are cached per posture (the holds of its stance aside: the caps only lower them), and
+        this stance's are among them."""
+        if wider is None:
             return self.pm.close_pairs(centers, slack, self.links)
+        return _within(self._cached_close(q, centers, wider), slack)
+
+    def _near_self(
+        self, q: np.ndarray, centers: np.ndarray, slack: np.ndarray, wider: np.ndarray
+    ) -> set:
+        """The SELF_PER_LINK closest sphere pairs of each candidate pair of links closer than
+        ``slack`` (P,) [m] at q (centres (S, 3)), from the pairs closer than ``wider`` (P,)
+        >= slack, cached per posture: a planner's queries start at the same one."""
+        return closest(
+            _within(self._cached_close(q, centers, wider), slack), SELF_PER_LINK
+        ).tuples()
+
+    def _cached_close(self, q: np.ndarray, centers: np.ndarray, slack: np.ndarray) -> Close:
+        """The candidate self pairs closer than ``slack`` (P,) [m] at q, cached on q's joints
+        and the slack."""
         key = self._posture_key(q, slack)
 
         def make() -> Close:
@@ -171,18 +199,6 @@ class ActiveSet:
             return found
 
         return _BELOW.get_or_make(key, make)
-
-    def _near_self(self, q: np.ndarray, centers: np.ndarray, slack: np.ndarray) -> set:
-        """The SELF_PER_LINK closest sphere pairs of each candidate pair of links closer than
-        ``slack`` (P,) [m] at q (centres (S, 3)); cached per posture: a planner's queries
-        start at the same one."""
-        key = self._posture_key(q, slack)
-
-        def make() -> frozenset[tuple[int, int]]:
-            near = closest(self.pm.close_pairs(centers, slack, self.links), SELF_PER_LINK)
-            return frozenset(near.tuples())
-
-        return set(_NEAR.get_or_make(key, make))
 
     def grow(self, scan: Scan) -> None:
         """Hold the scan's near and violated pairs too."""
