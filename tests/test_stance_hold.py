@@ -22,6 +22,8 @@ from posturegen.terms.contacts import FixedContact
 
 # the stance of issue 17's cliff: narrow, staggered, both feet yawed
 CLIFF = ([0.025, 0.081], [-0.028, -0.081], 0.045, 0.109)
+# another narrow stance, the toes turned the other way
+_OTHER = ([-0.01, 0.078], [0.01, -0.078], 0.1, -0.12)
 
 
 def _patch_error(problem, q: np.ndarray) -> float:
@@ -101,6 +103,43 @@ def test_holds_are_the_reference_rule_at_the_reference_stance_and_only_lower_els
     }
     assert ("leg_left_4_joint", "leg_right_4_joint") in lowered  # the knees: 1 mm apart
     assert all(a.startswith("leg_") and b.startswith("leg_") for a, b in lowered)
+
+
+def test_a_stances_first_scan_finds_the_pairs_of_a_scan_with_its_own_holds():
+    """The first scan of a solve reads the pairs within the holds without the stance's caps,
+    cached per posture, and keeps those within this stance's (lower) holds: the same pairs,
+    and the same closest ones, as a search with its holds; a second stance with other caps
+    at the same joints reads the cache (same pairs as its own search)."""
+    from posturegen.collision import active_set
+    from posturegen.collision.proxies import closest
+
+    def fresh(active, centres, margin):
+        clearance = np.minimum(active.pm.pair_clearance(margin), active.caps)
+        below = active.pm.close_pairs(
+            centres, active_set.violation_threshold(clearance), active.links
+        )
+        near = active.pm.close_pairs(centres, clearance + active.options.activation, active.links)
+        return below, near
+
+    active_set._BELOW.clear()
+    stances = [_problem(CLIFF, [0.3, -0.3, 0.9], True), _problem(_OTHER, [0.3, -0.3, 0.9], True)]
+    for k, problem in enumerate(stances):
+        active = ActiveSet.of(problem)
+        assert np.any(active.caps < active.pm.pair_clearance(MARGIN))  # capped stances
+        scan = active.scan(problem.q_init, MARGIN)
+        pin.forwardKinematics(active.model, active.data, problem.q_init)
+        centres = active.pm.centers_world(active.model, active.data)
+        below, near = fresh(active, centres, MARGIN)
+        assert scan.violated_self == closest(below, active_set.SELF_PER_LINK).tuples()
+        # any holds below the cached ones: the pairs of a search with them
+        wider = active.pm.pair_clearance(MARGIN) + active.options.activation
+        lower = wider - np.random.default_rng(k).uniform(0.0, 0.04, wider.shape)
+        got = active._below(problem.q_init, centres, lower, wider)
+        want = active.pm.close_pairs(centres, lower, active.links)
+        assert got.tuples() == want.tuples() and len(got.d) == len(want.d) > 0
+        if k == 0:  # computed at this stance's own centres: the closest ones agree exactly
+            assert scan.near_self == closest(near, active_set.SELF_PER_LINK).tuples()
+    assert len(active_set._BELOW) == 2  # one entry per slack (below, near) for both stances
 
 
 def test_the_pair_of_the_two_fixed_feet_leaves_the_program_not_the_mesh_check():
