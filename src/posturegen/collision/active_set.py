@@ -46,6 +46,8 @@ SELF_SLACK = 1e-3
 # links), for the first scan of a solve (its initial posture, the same for a planner's
 # queries): the violated ones and the near ones, each at the holds without a stance's caps
 _BELOW: BoundedCache[Close] = BoundedCache("self pairs below a slack", 64)
+# the near self pairs held at a posture with a stance's holds (the closest of each link pair)
+_NEAR: BoundedCache[frozenset[tuple[int, int]]] = BoundedCache("near self pairs", 64)
 
 
 def _within(close: Close, slack: np.ndarray) -> Close:
@@ -182,10 +184,13 @@ class ActiveSet:
     ) -> set:
         """The SELF_PER_LINK closest sphere pairs of each candidate pair of links closer than
         ``slack`` (P,) [m] at q (centres (S, 3)), from the pairs closer than ``wider`` (P,)
-        >= slack, cached per posture: a planner's queries start at the same one."""
-        return closest(
-            _within(self._cached_close(q, centers, wider), slack), SELF_PER_LINK
-        ).tuples()
+        >= slack; both cached per posture: a planner's queries start at the same one."""
+
+        def make() -> frozenset[tuple[int, int]]:
+            near = _within(self._cached_close(q, centers, wider), slack)
+            return frozenset(closest(near, SELF_PER_LINK).tuples())
+
+        return set(_NEAR.get_or_make(self._posture_key(q, slack), make))
 
     def _cached_close(self, q: np.ndarray, centers: np.ndarray, slack: np.ndarray) -> Close:
         """The candidate self pairs closer than ``slack`` (P,) [m] at q, cached on q's joints

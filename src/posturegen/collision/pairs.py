@@ -158,8 +158,8 @@ def _overlapping(
 
 
 # unchecked_entries per (model, geometry, rule, user pairs): every posture of a robot lists
-# the same (Talos: 3 ms of each whole call); the objects are held, their ids stay their own
-_UNCHECKED: dict[tuple[Any, ...], tuple[Any, list[dict[str, Any]]]] = {}
+# the same (Talos: 3 ms of each whole call); the objects are held
+_UNCHECKED: BoundedCache[list[dict[str, Any]]] = BoundedCache("unchecked pairs", 16)
 
 
 def unchecked_entries(
@@ -171,13 +171,9 @@ def unchecked_entries(
     """The posture file's ``collision.unchecked``: every unchecked pair of joints that carry
     geometry, ``{"pair": [joint, joint], "reason": ...}``, sorted by reason then names (a
     fresh copy of the entries listed once per robot and user pairs)."""
-    key = (id(model), id(geometry), id(rule), user)
-    hit = _UNCHECKED.get(key)
-    if hit is None or any(a is not b for a, b in zip(hit[0], (model, geometry, rule), strict=True)):
-        if len(_UNCHECKED) >= 16:
-            _UNCHECKED.clear()
-        hit = _UNCHECKED[key] = ((model, geometry, rule), _unchecked(model, geometry, rule, user))
-    return [{"pair": list(e["pair"]), "reason": e["reason"]} for e in hit[1]]
+    key = (Ref(model), Ref(geometry), Ref(rule), user)
+    listed = _UNCHECKED.get_or_make(key, lambda: _unchecked(model, geometry, rule, user))
+    return [{"pair": list(e["pair"]), "reason": e["reason"]} for e in listed]
 
 
 def _unchecked(
