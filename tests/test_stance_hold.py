@@ -37,15 +37,20 @@ def _patch_error(problem, q: np.ndarray) -> float:
     return worst
 
 
+def _stances(width: float, stagger: float, yaw: float) -> st.SearchStrategy:
+    """Feet (left, right positions [m], yaws [rad]) up to these width, stagger and yaws."""
+    return st.builds(
+        lambda w, s, yl, yr: ([s / 2, w / 2], [-s / 2, -w / 2], yl, yr),
+        st.floats(0.15, width),
+        st.floats(-stagger, stagger),
+        st.floats(-yaw, yaw),
+        st.floats(-yaw, yaw),
+    )
+
+
 @settings(max_examples=15, deadline=None)
-@given(
-    width=st.floats(0.15, 0.26),
-    stagger=st.floats(-0.05, 0.05),
-    yaw_l=st.floats(-0.2, 0.2),
-    yaw_r=st.floats(-0.2, 0.2),
-)
-def test_the_stance_posture_stands_on_the_fixed_contacts(width, stagger, yaw_l, yaw_r):
-    feet = ([stagger / 2, width / 2], [-stagger / 2, -width / 2], yaw_l, yaw_r)
+@given(feet=_stances(0.26, 0.05, 0.2))
+def test_the_stance_posture_stands_on_the_fixed_contacts(feet):
     problem = _problem(feet, [0.3, -0.3, 0.9], True)
     fixed = [c for c in problem.contacts if isinstance(c, FixedContact)]
     q = stance_posture(problem.robot, problem.q_init, fixed)
@@ -62,18 +67,12 @@ def test_the_stance_posture_stands_on_the_fixed_contacts(width, stagger, yaw_l, 
 
 
 @settings(max_examples=10, deadline=None)
-@given(
-    width=st.floats(0.15, 0.24),
-    stagger=st.floats(-0.04, 0.04),
-    yaw_l=st.floats(-0.15, 0.15),
-    yaw_r=st.floats(-0.15, 0.15),
-)
-def test_caps_within_their_reach_hold_as_caps_of_every_pair(width, stagger, yaw_l, yaw_r):
+@given(feet=_stances(0.24, 0.04, 0.15))
+def test_caps_within_their_reach_hold_as_caps_of_every_pair(feet):
     """The caps are searched only among pairs closer than CAP_REACH in the stance posture
     (or the margin, when larger); the holds are those of caps searched over every pair, for
     margins below and above CAP_REACH (30 cm: the legs' far pairs, held closer than at the
     reference once the feet are yawed)."""
-    feet = ([stagger / 2, width / 2], [-stagger / 2, -width / 2], yaw_l, yaw_r)
     problem = _problem(feet, [0.3, -0.3, 0.9], True)
     pm = proxy_model(problem.robot)
     every = stance_caps(problem, pm, reach=10.0)
