@@ -142,10 +142,9 @@ class ActiveSet:
             fresh = np.where(self._held_env(), np.inf, d_env)
             out.violated_env = self._env(fresh, margin - TOL_VIOLATION)
         if len(self.links) and (near or out.violated_self or out.violated_env):
-            activation = self.options.activation
-            out.near_self = self._near_self(
-                q, centers, clearance + activation, reference + activation
-            )
+            slack = clearance + self.options.activation
+            wider = reference + self.options.activation if near else None
+            out.near_self = self._near_self(q, centers, slack, wider)
         return out
 
     def term(self, margin: float) -> CollisionTerm:
@@ -180,14 +179,18 @@ class ActiveSet:
         return _within(self._cached_close(q, centers, wider), slack)
 
     def _near_self(
-        self, q: np.ndarray, centers: np.ndarray, slack: np.ndarray, wider: np.ndarray
+        self, q: np.ndarray, centers: np.ndarray, slack: np.ndarray, wider: np.ndarray | None
     ) -> set:
         """The SELF_PER_LINK closest sphere pairs of each candidate pair of links closer than
-        ``slack`` (P,) [m] at q (centres (S, 3)), from the pairs closer than ``wider`` (P,)
-        >= slack; both cached per posture: a planner's queries start at the same one."""
+        ``slack`` (P,) [m] at q (centres (S, 3)), cached per posture. With ``wider`` (P,) >=
+        slack (a solve's first posture, shared by every stance), from the cached pairs closer
+        than it; else searched with ``slack`` (a run's solution: a posture of its own)."""
 
         def make() -> frozenset[tuple[int, int]]:
-            near = _within(self._cached_close(q, centers, wider), slack)
+            if wider is None:
+                near = self.pm.close_pairs(centers, slack, self.links)
+            else:
+                near = _within(self._cached_close(q, centers, wider), slack)
             return frozenset(closest(near, SELF_PER_LINK).tuples())
 
         return set(_NEAR.get_or_make(self._posture_key(q, slack), make))
