@@ -19,9 +19,11 @@ import pytest
 import yaml
 
 from posturegen import problem_from_dict, solve
+from posturegen._cache import clear_caches
 from posturegen.cli import _demo_dir, main
 from posturegen.errors import InputError
 from posturegen.solver import _lifeline, codegen
+from posturegen.solver import compile as compile_module
 from posturegen.solver.compile import _CACHE, symbolic
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
@@ -74,14 +76,14 @@ def test_library_key_covers_the_compiler_flags(monkeypatch):
 def test_library_key_covers_the_code_of_hand_built_derivatives(monkeypatch):
     """Programs with BlockDerivatives add the package's source digest to their key (their
     derivative functions are built only for a solver made from the expressions)."""
-    from posturegen.solver import compile as P
+    from posturegen.solver import fingerprint as F
 
     plain = symbolic(_problem("off"))
     assert plain.derivative_key == "" and plain.derivative_functions == {}
     nlp = plain.function
     key = codegen.library_key(nlp, "abc")
     assert key != codegen.library_key(nlp) and key == codegen.library_key(nlp, "abc")
-    assert P._source_digest() == P._source_digest()  # cached, stable within a process
+    assert F.source_digest() == F.source_digest()  # cached, stable within a process
 
 
 def test_modes():
@@ -145,6 +147,62 @@ def test_second_build_loads_from_disk_without_compiling(cache, monkeypatch):
     assert compiled.library
 
 
+def _declaring(monkeypatch) -> list[int]:
+    """Count the declarations of symbolic programs from now on."""
+    calls: list[int] = []
+    declare = compile_module._declare
+    monkeypatch.setattr(compile_module, "_declare", lambda p: (calls.append(1), declare(p))[1])
+    return calls
+
+
+@needs_cc
+def test_a_structure_found_by_its_fingerprint_is_not_declared(cache, monkeypatch):
+    """In a new process (caches cleared), a structure whose library and layout are on disk is
+    solved from them without its symbolic program: the same layout, the same posture."""
+    first = _problem("sync")
+    built = first.compile()  # built by an earlier test or now
+    reference = solve(first)
+    assert built.library and codegen.layout_path(built.library_key).is_file()
+    clear_caches()
+    calls = _declaring(monkeypatch)
+    p = _problem("sync")
+    compiled = p.compile()
+    assert calls == [] and compiled.library and compiled.library_key == built.library_key
+    for name in ("x_index", "p_index", "g_index", "cost_names"):
+        assert getattr(compiled, name) == getattr(built, name)
+    for name in ("lbx", "ubx", "lbg", "ubg"):
+        assert np.array_equal(getattr(compiled, name), getattr(built, name))
+    r = solve(p)
+    assert calls == [] and r.success and r.iterations == reference.iterations
+    assert np.array_equal(r.q, reference.q) and np.array_equal(r.torques, reference.torques)
+
+
+@needs_cc
+def test_a_layout_that_disagrees_with_its_library_is_not_used(cache, monkeypatch):
+    """A layout beside the library with one constraint row too few: the structure is
+    declared (and solves) as without one."""
+    key = _problem("sync").compile().library_key
+    path = codegen.layout_path(key)
+    saved = path.read_bytes()
+    data = dict(np.load(path))
+    data["lbg"], data["ubg"] = data["lbg"][:-1], data["ubg"][:-1]
+    try:
+        with path.open("wb") as f:
+            np.savez(f, **data)
+        clear_caches()
+        calls = _declaring(monkeypatch)
+        p = _problem("sync")
+        compiled = p.compile()
+        assert calls == [1] and compiled.library and compiled.n_g == len(data["lbg"]) + 1
+        assert solve(p).success
+        path.unlink()
+        clear_caches()
+        assert _problem("sync").compile().library and calls == [1, 1]  # no layout: declared
+    finally:
+        path.write_bytes(saved)
+        clear_caches()
+
+
 @needs_cc
 def test_sync_builds_before_the_first_solve(cache, monkeypatch):
     monkeypatch.setattr(codegen, "HOT_FLAGS", ("-O0",))  # another key, and a quick build
@@ -196,14 +254,16 @@ def test_prune_keeps_the_most_recently_used_libraries(tmp_path, monkeypatch):
 # ----------------------------------------------------------------- compilers die with us
 CHILD = """
 import json, os, sys, time, uuid
+from posturegen._cache import clear_caches
 from posturegen.solver import _lifeline, codegen
+from posturegen.solver import compile as compile_module
 from posturegen.cli import _demo_dir
 from posturegen.io.problem_file import load_problem
 
 codegen.HOT_FLAGS = ("-O2",)  # the Hessian then compiles for minutes: it cannot end first
 compiled = load_problem(_demo_dir() / "stand-reach.yaml").compile()
 key = codegen.library_key(compiled.nlp, uuid.uuid4().hex)  # never built: a real compile
-codegen.build_in_background(key, compiled.solver, compiled.nlp)
+codegen.build_in_background(key, compiled.sources())
 t0 = time.time()
 while time.time() - t0 < 120:  # until a compiler proper (cc1) runs in one of the groups
     groups = _lifeline.running()
@@ -292,7 +352,7 @@ def test_a_build_past_its_timeout_is_killed(cache, monkeypatch):
     monkeypatch.setattr(codegen, "_FAILED", set())
     t0 = time.monotonic()
     with pytest.warns(UserWarning, match="longer than 0.2 s"):
-        assert codegen.build(key, compiled.solver, compiled.nlp) is None
+        assert codegen.build(key, compiled.sources()) is None
     assert time.monotonic() - t0 < 5.0  # the Hessian alone compiles for seconds
     assert groups and _gone(groups) == [] and _lifeline.running() == []
     assert key in codegen._FAILED and not codegen.library_path(key).exists()

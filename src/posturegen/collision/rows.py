@@ -174,6 +174,11 @@ class CollisionTerm(Term):
     def key(self) -> tuple[Any, ...]:
         return ("collision", self.layout, len(self.boxes))
 
+    def fingerprint(self) -> tuple[Any, ...]:
+        """The key and the proxy model's joint pairs and limbs, which place each slot's rows
+        and clearance parameter."""
+        return (*self.key(), self.pm.joint_pairs, self.pm.limb)
+
     def declare(self, ctx: BuildContext) -> None:
         nlp = ctx.nlp
         margin = nlp.parameter("collision.margin", 1)

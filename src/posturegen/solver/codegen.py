@@ -6,11 +6,16 @@ virtual machine interprets them; their C (CasADi's code generator), compiled wit
 C compiler, runs the same floating-point operations in the same order (no fast-math, no
 contraction into fused multiply-adds), so an IPOPT run gives the same iterates to rounding.
 
-A library is keyed by the SHA-256 of the program's *content*: the serialized function
-(x, p) -> (f, g), plus the CasADi version, the machine and the compiler flags. Any change of a
-term, a robot, a contact type or the active collision pairs gives a new key; the same structure
-in another process or a later session finds its library in ``cache_dir()``
-(``$POSTUREGEN_CACHE/solvers``, else ``~/.cache/posturegen/solvers``) and pays no compilation.
+A library is keyed by the structure's fingerprint (:mod:`posturegen.solver.fingerprint`: the
+package's sources, the robot's model, each term's structure and what it reads), else by the
+SHA-256 of the program's *content* (the serialized function (x, p) -> (f, g)), plus the CasADi
+version, the machine and the compiler flags. Any change of a term, a robot, a contact type or
+the active collision pairs gives a new key; the same structure in another process or a later
+session finds its library in ``cache_dir()`` (``$POSTUREGEN_CACHE/solvers``, else
+``~/.cache/posturegen/solvers``) and pays no compilation. Beside each library, its layout
+(``KEY.layout.npz``: where each block sits in x, p and g, the bounds) and, in the library, the
+program and its outputs: a structure found by its fingerprint is solved and re-checked without
+declaring its symbolic program.
 
 Modes (:attr:`posturegen.solver.problem.SolverOptions.codegen`, else ``$POSTUREGEN_CODEGEN``):
 
@@ -51,18 +56,21 @@ from pathlib import Path
 from typing import Any
 
 import casadi as ca
+import numpy as np
 
 from ..errors import InputError
 from . import _lifeline
 
-CODEGEN_VERSION = 1
+CODEGEN_VERSION = 2  # 2: the outputs function in the library, the layout beside it
 MODES = ("auto", "sync", "off")
 # the functions IPOPT calls at every iteration, and those nlpsol needs to exist
 HOT_FUNCTIONS = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l")
-COLD_FUNCTIONS = ("nlp", "nlp_grad")
+COLD_FUNCTIONS = ("nlp", "nlp_grad", "outputs")
 HOT_FLAGS = ("-Og", "-ffp-contract=off")
 COLD_FLAGS = ("-O0",)
-MAX_CACHE_BYTES = 256 << 20  # least recently used libraries beyond this are deleted (1-4 MB each)
+# least recently used libraries beyond this are deleted (1-4 MB each; 256 MB, the bound
+# before, held fewer than the bench's families use)
+MAX_CACHE_BYTES = 1 << 30
 AUTO_BUILD_AFTER_USES = 2  # mode auto: compile when a structure is solved this many times
 COMPILE_TIMEOUT_S = 600.0  # a library's build (compilation and link) that takes longer fails
 
@@ -95,23 +103,59 @@ def resolve_mode(option: str | None) -> str:
     return mode
 
 
-def library_key(nlp: ca.Function, extra: str = "") -> str:
-    """SHA-256 (20 hex digits) of the program (x, p) -> (f, g), ``extra`` (what else its
-    derivative functions depend on: posturegen.solver.problem._Program.derivative_key), the CasADi
-    version, the machine and the compiler flags."""
-    h = hashlib.sha256()
-    h.update(
+def _key_hash(extra: str) -> Any:
+    """A SHA-256 started with what every key covers: the code generator's version, CasADi's,
+    the machine, the compiler flags, and ``extra``."""
+    return hashlib.sha256(
         repr(
             (CODEGEN_VERSION, ca.__version__, platform.machine(), HOT_FLAGS, COLD_FLAGS, extra)
         ).encode()
     )
+
+
+def library_key(nlp: ca.Function, extra: str = "") -> str:
+    """SHA-256 (20 hex digits) of the program (x, p) -> (f, g), ``extra`` (what else its
+    derivative functions depend on: posturegen.solver.problem._Program.derivative_key), the CasADi
+    version, the machine and the compiler flags."""
+    h = _key_hash(extra)
     h.update(nlp.serialize().encode())
     return h.hexdigest()[:20]
+
+
+def structure_key(fingerprint: str) -> str:
+    """The library key (20 hex digits) of a structure's fingerprint
+    (:func:`posturegen.solver.fingerprint.structure_fingerprint`), the CasADi version, the
+    machine and the compiler flags."""
+    return _key_hash("structure " + fingerprint).hexdigest()[:20]
 
 
 def library_path(key: str) -> Path:
     """The cached library of a key (it may not exist yet)."""
     return cache_dir() / f"{key}.so"
+
+
+def layout_path(key: str) -> Path:
+    """The layout beside the library of a key."""
+    return cache_dir() / f"{key}.layout.npz"
+
+
+def read_layout(key: str) -> dict[str, np.ndarray] | None:
+    """The arrays saved beside the library of ``key`` (None when absent or unreadable)."""
+    try:
+        with np.load(layout_path(key)) as data:
+            return {name: data[name] for name in data.files}
+    except (OSError, ValueError):
+        return None
+
+
+def program_functions(key: str) -> tuple[ca.Function, ca.Function] | None:
+    """The program (x, p) -> (f, g) and its outputs from the library of ``key`` (None when
+    the library lacks them)."""
+    path = str(library_path(key))
+    try:
+        return ca.external("nlp", path), ca.external("outputs", path)
+    except RuntimeError:
+        return None
 
 
 @dataclass(frozen=True)
@@ -153,18 +197,29 @@ def load(key: str, ipopt_options: dict[str, Any]) -> ca.Function | None:
     return solver
 
 
-def build(key: str, solver: ca.Function, nlp: ca.Function) -> BuildInfo | None:
+@dataclass(frozen=True)
+class Sources:
+    """What a library is generated from: the solver (IPOPT's functions), the program
+    (x, p) -> (f, g), its outputs, and the layout arrays saved beside it."""
+
+    solver: ca.Function
+    nlp: ca.Function
+    outputs: ca.Function
+    layout: dict[str, np.ndarray]
+
+
+def build(key: str, what: Sources) -> BuildInfo | None:
     """Generate, compile and cache the library of ``key`` now (waits; after a queued
     background build of it, if any); None when it was already built or the build failed."""
     wait(key)
     if key in _FAILED or library_path(key).is_file():
         return None
     t0 = time.perf_counter()
-    tmp, sources = _generate(solver, nlp)
+    tmp, sources = _generate(what)
     return _compile(key, tmp, sources, time.perf_counter() - t0, background=False)
 
 
-def build_in_background(key: str, solver: ca.Function, nlp: ca.Function) -> None:
+def build_in_background(key: str, what: Sources) -> None:
     """Generate the sources now (CasADi, a fraction of a second) and queue their compilation
     for the background worker (one daemon thread: one build at a time, each using the cores
     in parallel); the library appears in the cache when done."""
@@ -174,7 +229,7 @@ def build_in_background(key: str, solver: ca.Function, nlp: ca.Function) -> None
         _PENDING.add(key)
     t0 = time.perf_counter()
     try:
-        tmp, sources = _generate(solver, nlp)
+        tmp, sources = _generate(what)
     except BaseException:
         with _LOCK:
             _PENDING.discard(key)
@@ -220,17 +275,19 @@ def wait(key: str | None = None, timeout: float | None = None) -> bool:
         )
 
 
-def _generate(solver: ca.Function, nlp: ca.Function) -> tuple[Path, list[tuple[Path, bool]]]:
+def _generate(what: Sources) -> tuple[Path, list[tuple[Path, bool]]]:
     """C sources of the library, one per function, in a fresh temporary folder next to the
-    cache; each with whether it is hot (compiled optimized)."""
+    cache; each with whether it is hot (compiled optimized); the layout saved there."""
     root = cache_dir()
     root.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".build-", dir=root))
     with _LOCK:
         _TMPDIRS.add(tmp)
+    np.savez(tmp / "layout.npz", **what.layout)
+    own = {"nlp": what.nlp, "outputs": what.outputs}
     sources = []
     for name in (*HOT_FUNCTIONS, *COLD_FUNCTIONS):
-        fn = nlp if name == "nlp" else solver.get_function(name)
+        fn = own[name] if name in own else what.solver.get_function(name)
         gen = ca.CodeGenerator(f"{name}.c", {"with_header": False})
         gen.add(fn)
         sources.append((Path(gen.generate(str(tmp) + os.sep)), name in HOT_FUNCTIONS))
@@ -266,6 +323,7 @@ def _compile(
         objects = [str(src.with_suffix(".o")) for src, _ in sources]
         _run([([cc, "-shared", *objects, "-o", str(out)], "link", tmp / "link.log")], 1, deadline)
         size = out.stat().st_size
+        os.replace(tmp / "layout.npz", layout_path(key))  # first: a library has its layout
         os.replace(out, library_path(key))
         info = BuildInfo(key, generate_s, time.perf_counter() - t0, size, background)
         BUILDS.append(info)
@@ -327,6 +385,7 @@ def _prune() -> None:
             total += st.st_size
             if total > MAX_CACHE_BYTES:
                 path.unlink(missing_ok=True)
+                layout_path(path.stem).unlink(missing_ok=True)
     except OSError:
         pass
 

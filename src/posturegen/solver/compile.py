@@ -8,22 +8,22 @@ numeric parameter values, initial guess and bounds of an instance are filled by
 
 from __future__ import annotations
 
-import hashlib
+import json
 import threading
 import time
 from dataclasses import dataclass, field, fields
-from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import casadi as ca
 import numpy as np
 
-from .._cache import BoundedCache, memoize
+from .._cache import BoundedCache
 from ..errors import SolveError
 from ..model.robot import Robot
 from ..terms.elastic import Elastic, soften
 from ..terms.nlp import NLP, BlockDerivatives, BuildContext, Term, check_derivatives
 from . import codegen
+from .fingerprint import source_digest, structure_fingerprint
 
 
 class Compilable(Protocol):
@@ -95,7 +95,11 @@ class CompiledNLP(_Layout):
         if solver is not None:
             self.solver, self.library = solver, True
         elif self.codegen_mode == "auto" and self.uses >= codegen.AUTO_BUILD_AFTER_USES:
-            codegen.build_in_background(self.library_key, self.solver, self.nlp)
+            codegen.build_in_background(self.library_key, self.sources())
+
+    def sources(self) -> codegen.Sources:
+        """What this structure's library is generated from."""
+        return codegen.Sources(self.solver, self.nlp, self.outputs, _layout_arrays(self))
 
 
 def _layout(blocks: dict[str, Any], size: Any) -> dict[str, slice]:
@@ -142,13 +146,16 @@ class _Program(_Layout):
         (the code that writes them), so that any change to it builds the library again; ""
         without them. Cheaper than serializing the derivative functions (140 ms)."""
         has = self.declared is not None and bool(self.declared.derivatives)
-        return _source_digest() if has else ""
+        return source_digest() if has else ""
 
 
 CACHE_SIZE = 32
-# compiled solvers by structure and solver options; symbolic programs by structure
+# compiled solvers by structure and solver options; symbolic programs, layouts read from the
+# disk cache and fingerprints ("": none) by structure
 _CACHE: BoundedCache[CompiledNLP] = BoundedCache("compiled solvers", CACHE_SIZE)
 _PROGRAMS: BoundedCache[_Program] = BoundedCache("symbolic programs", CACHE_SIZE)
+_LAYOUTS: BoundedCache[_Layout] = BoundedCache("layouts from the disk cache", CACHE_SIZE)
+_FINGERPRINTS: BoundedCache[str] = BoundedCache("structure fingerprints", 4 * CACHE_SIZE)
 
 
 def is_compiled(program: Compilable) -> bool:
@@ -164,38 +171,140 @@ def compile_program(program: Compilable) -> CompiledNLP:
     if cached is not None:
         return cached
     t0 = time.perf_counter()
-    prog = symbolic(program)
     opts = program.solver_options.ipopt()
     mode = program.solver_options.codegen_mode()
-    lib_key = codegen.library_key(prog.function, prog.derivative_key) if mode != "off" else None
-    # the structure's library from the disk cache: no SX derivatives to build
-    solver = codegen.load(lib_key, opts) if lib_key is not None else None
-    library = solver is not None
-    if solver is None:
-        solver = ca.nlpsol(
-            "posture",
-            "ipopt",
-            {"x": prog.x, "p": prog.p, "f": prog.f, "g": prog.g},
-            {**opts, **prog.derivative_functions},
-        )
-        if mode == "sync" and lib_key is not None:
-            codegen.build(lib_key, solver, prog.function)
-            built = codegen.load(lib_key, opts)
-            if built is not None:
-                solver, library = built, True
+    lib_key = _structure_key(program) if mode != "off" else None
+    # found by its fingerprint: solved from its library, without its symbolic program
+    found = _from_disk(program, lib_key, opts) if lib_key is not None else None
+    built = found or _from_expressions(program, lib_key, opts, mode)
+    layout = built.layout
     compiled = CompiledNLP(
         key=key,
-        solver=solver,
-        nlp=prog.function,
-        outputs=prog.outputs,
-        **{f.name: getattr(prog, f.name) for f in fields(_Layout)},
+        solver=built.solver,
+        nlp=built.nlp,
+        outputs=built.outputs,
+        **{f.name: getattr(layout, f.name) for f in fields(_Layout)},
         build_time_s=time.perf_counter() - t0,
         ipopt_options=opts,
         codegen_mode=mode,
-        library_key=lib_key,
-        library=library,
+        library_key=built.library_key,
+        library=built.library,
     )
     return _CACHE.put(key, compiled)
+
+
+def _structure_key(program: Compilable) -> str | None:
+    """The library key of the structure's fingerprint (None: it has none)."""
+    fingerprint = _FINGERPRINTS.get_or_make(
+        program.key()[:3], lambda: structure_fingerprint(program) or ""
+    )
+    return codegen.structure_key(fingerprint) if fingerprint else None
+
+
+class _Built(NamedTuple):
+    """A structure's solver (on its library or on the expressions), its program (x, p) ->
+    (f, g), its outputs and its layout."""
+
+    solver: ca.Function
+    nlp: ca.Function
+    outputs: ca.Function
+    layout: _Layout
+    library: bool
+    library_key: str | None
+
+
+def _from_disk(program: Compilable, lib_key: str, opts: dict[str, Any]) -> _Built | None:
+    """IPOPT on the library of ``lib_key``, its program and outputs, and its layout; None
+    unless all are on disk and agree in size."""
+    layout = _read_layout(lib_key)
+    functions = codegen.program_functions(lib_key) if layout is not None else None
+    solver = codegen.load(lib_key, opts) if functions is not None else None
+    if layout is None or functions is None or solver is None or not _agree(solver, layout):
+        return None
+    _LAYOUTS.put(program.key()[:3], layout)
+    return _Built(solver, *functions, layout, True, lib_key)
+
+
+def _from_expressions(
+    program: Compilable, lib_key: str | None, opts: dict[str, Any], mode: str
+) -> _Built:
+    """The structure's symbolic program (declared and cached) and its solver: on its library
+    when the disk cache has it (by ``lib_key``, else by the program's content), else on the
+    expressions (in mode ``sync``, its library built first)."""
+    prog = symbolic(program)
+    if mode != "off" and lib_key is None:
+        lib_key = codegen.library_key(prog.function, prog.derivative_key)
+    # the structure's library from the disk cache: no SX derivatives to build
+    solver = codegen.load(lib_key, opts) if lib_key is not None else None
+    if solver is not None and _agree(solver, prog):
+        return _Built(solver, prog.function, prog.outputs, prog, True, lib_key)
+    solver = ca.nlpsol(
+        "posture",
+        "ipopt",
+        {"x": prog.x, "p": prog.p, "f": prog.f, "g": prog.g},
+        {**opts, **prog.derivative_functions},
+    )
+    if mode == "sync" and lib_key is not None:
+        what = codegen.Sources(solver, prog.function, prog.outputs, _layout_arrays(prog))
+        codegen.build(lib_key, what)
+        built = codegen.load(lib_key, opts)
+        if built is not None and _agree(built, prog):
+            return _Built(built, prog.function, prog.outputs, prog, True, lib_key)
+    return _Built(solver, prog.function, prog.outputs, prog, False, lib_key)
+
+
+def _agree(solver: ca.Function, layout: _Layout) -> bool:
+    """Whether a solver's x, p and g have the layout's sizes."""
+    n_p = sum(s.stop - s.start for s in layout.p_index.values())
+    return (solver.size1_in("x0"), solver.size1_in("p"), solver.size1_out("g")) == (
+        layout.n_x,
+        n_p,
+        layout.n_g,
+    )
+
+
+def layout_of(program: Compilable) -> _Layout:
+    """The layout of the program's structure: from this process's caches, else from beside
+    its library on disk, else from its symbolic program (declared and cached)."""
+    k = program.key()[:3]
+    found = _PROGRAMS.get(k) or _LAYOUTS.get(k)
+    if found is not None:
+        return found
+    if program.solver_options.codegen_mode() != "off":
+        lib_key = _structure_key(program)
+        layout = _read_layout(lib_key) if lib_key is not None else None
+        if layout is not None:
+            return _LAYOUTS.put(k, layout)
+    return symbolic(program)
+
+
+def _layout_arrays(layout: _Layout) -> dict[str, np.ndarray]:
+    """The layout as arrays (saved beside a library)."""
+    index = {
+        name: {block: [s.start, s.stop] for block, s in getattr(layout, name).items()}
+        for name in ("x_index", "p_index", "g_index")
+    }
+    return {
+        "index": np.array(json.dumps({**index, "cost_names": layout.cost_names})),
+        **{name: getattr(layout, name) for name in ("lbx", "ubx", "lbg", "ubg")},
+    }
+
+
+def _read_layout(lib_key: str) -> _Layout | None:
+    """The layout saved beside the library of ``lib_key`` (None: absent or unreadable)."""
+    data = codegen.read_layout(lib_key)
+    try:
+        meta = json.loads(str(data["index"])) if data is not None else None
+        if meta is None:
+            return None
+        index = {
+            name: {block: slice(*ends) for block, ends in meta[name].items()}
+            for name in ("x_index", "p_index", "g_index")
+        }
+        bounds = {n: np.asarray(data[n], dtype=float) for n in ("lbx", "ubx", "lbg", "ubg")}
+        return _Layout(**index, cost_names=list(meta["cost_names"]), **bounds)
+    except (KeyError, ValueError, TypeError):
+        return None
 
 
 def symbolic(program: Compilable) -> _Program:
@@ -301,16 +410,6 @@ def constraint_counts(program: Compilable) -> dict[str, int]:
     """Rows per constraint block."""
     c = symbolic(program)
     return {n: s.stop - s.start for n, s in c.g_index.items()}
-
-
-@memoize("source digest", 1)
-def _source_digest() -> str:
-    """SHA-256 (16 hex digits) of the package's Python sources."""
-    h = hashlib.sha256()
-    root = Path(__file__).parent.parent
-    for path in sorted(root.rglob("*.py")):
-        h.update(str(path.relative_to(root)).encode() + path.read_bytes())
-    return h.hexdigest()[:16]
 
 
 def _derivative_functions(

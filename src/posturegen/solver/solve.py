@@ -23,7 +23,7 @@ from ..collision.rows import CollisionTerm
 from ..collision.separation import separated_start
 from ..io.posture_file import add_solve_fields, posture_dict, write_posture
 from ..verify import VerifyReport, verify_posture
-from .compile import CompiledNLP, initial_guess, is_compiled, symbolic
+from .compile import CompiledNLP, initial_guess, is_compiled, layout_of
 from .problem import Problem, Program, SolverOptions
 from .starts import START_MU_INIT, START_WARM_MU_INIT, Solved, carried, start_vector
 
@@ -502,7 +502,7 @@ def _started(
     multipliers when the program has no collision rows and the start has them (IPOPT's warm
     start from START_WARM_MU_INIT; else the barrier from START_MU_INIT unless the options set
     one)."""
-    layout = symbolic(program)  # the variables' blocks (no solver built)
+    layout = layout_of(program)  # the variables' blocks (no solver built)
     x_init = initial_guess(program, layout)
     x = start_vector(program, x_init, layout.x_index, start)
     if program.collision_options is not None:

@@ -66,6 +66,12 @@ class Contact(Term):
         """Number of force-bearing points (0 for contacts that bear no force)."""
         return 0
 
+    def fingerprint(self) -> tuple[Any, ...]:
+        """The key (which names the patch) and the patch's geometry, which the declaration
+        reads: its joint, its placement on it and its polygon."""
+        patch = self.patch
+        return (*self.key(), patch.joint_id, patch.T_joint_patch, patch.polygon.vertices)
+
     @abstractmethod
     def to_dict(self, outputs: dict[str, np.ndarray]) -> dict[str, Any]:
         """The posture file's entry for this contact, from the solution's outputs."""

@@ -179,6 +179,12 @@ class Term(ABC):
     def key(self) -> tuple[Any, ...]:
         """Everything that changes the program's structure (not its parameter values)."""
 
+    def fingerprint(self) -> tuple[Any, ...]:
+        """What the declaration reads, as values: :meth:`key` and what it names by reference
+        (a contact's patch, the collision rows' pair list); the compiled library's key across
+        processes (:mod:`posturegen.solver.fingerprint`)."""
+        return self.key()
+
     @abstractmethod
     def declare(self, ctx: BuildContext) -> None:
         """Add symbolic variables, parameters, constraints and costs to ``ctx.nlp``."""
