@@ -216,12 +216,11 @@ class _Built(NamedTuple):
 def _from_disk(program: Compilable, lib_key: str, opts: dict[str, Any]) -> _Built | None:
     """IPOPT on the library of ``lib_key``, its program and outputs, and its layout; None
     unless all are on disk and agree in size."""
-    layout = _read_layout(lib_key)
+    layout = _disk_layout(program, lib_key)
     functions = codegen.program_functions(lib_key) if layout is not None else None
     solver = codegen.load(lib_key, opts) if functions is not None else None
     if layout is None or functions is None or solver is None or not _agree(solver, layout):
         return None
-    _LAYOUTS.put(program.key()[:3], layout)
     return _Built(solver, *functions, layout, True, lib_key)
 
 
@@ -272,10 +271,22 @@ def layout_of(program: Compilable) -> _Layout:
         return found
     if program.solver_options.codegen_mode() != "off":
         lib_key = _structure_key(program)
-        layout = _read_layout(lib_key) if lib_key is not None else None
+        layout = _disk_layout(program, lib_key) if lib_key is not None else None
         if layout is not None:
-            return _LAYOUTS.put(k, layout)
+            return layout
     return symbolic(program)
+
+
+def _disk_layout(program: Compilable, lib_key: str) -> _Layout | None:
+    """The layout saved beside the library of ``lib_key``, read once per process (then
+    cached by structure; a solver-option variant of the structure reads no file)."""
+    k = program.key()[:3]
+    layout = _LAYOUTS.get(k)
+    if layout is None:
+        layout = _read_layout(lib_key)
+        if layout is not None:
+            _LAYOUTS.put(k, layout)
+    return layout
 
 
 def _layout_arrays(layout: _Layout) -> dict[str, np.ndarray]:
