@@ -280,14 +280,26 @@ def _grouped(spheres: list[Sphere]) -> list[list[int]]:
 
 def _cache_key(robot: Robot) -> str:
     """A digest of what the fit depends on: the fitting code itself (its modules' sources:
-    any change of a constant or a step fits anew), the URDF and the SRDF."""
+    any change of a constant or a step fits anew), the URDF, the SRDF and the collision
+    meshes' files (the proxies cover their surfaces: an edited mesh is fitted anew)."""
     h = hashlib.sha1(f"v{PROXY_VERSION}".encode())
     for module in (proxy_fit, surface, pairs):
         h.update(Path(str(module.__file__)).read_bytes())
     for path in (robot.urdf, robot.srdf):
         if path is not None:
             h.update(Path(path).read_bytes())
+    for mesh in mesh_files(robot.collision_model()):
+        h.update(mesh.name.encode() + b"\0")  # not the folder: a moved install keeps them
+        h.update(mesh.read_bytes())
     return h.hexdigest()[:16]
+
+
+def mesh_files(geometry: pin.GeometryModel) -> list[Path]:
+    """The mesh files of a geometry model, sorted (its primitive shapes have none: their
+    sizes are in the URDF). Talos' 24 files, 0.8 MB, hash in 1.6 ms; G1's 18 MB in 15 ms,
+    against 1.4 s to load them."""
+    paths = {Path(g.meshPath) for g in geometry.geometryObjects if g.meshPath}
+    return sorted(p for p in paths if p.is_absolute() and p.is_file())
 
 
 def robot_spheres(robot: Robot, rule: PairRule) -> tuple[list[Sphere], dict[str, Any]]:
