@@ -9,13 +9,13 @@ from pathlib import Path
 import numpy as np
 
 from posturegen.collision.proxies import _cache_key, mesh_files
-from posturegen.model.robot import load_robot, shipped_models_dir
+from posturegen.model.robot import Robot, load_robot, shipped_models_dir
 
 # a binary STL's triangle after its 80-byte header and count: normal, 3 vertices, attribute
 _TRIANGLE = np.dtype([("normal", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
 
 
-def _hrp2(root: Path) -> object:
+def _hrp2(root: Path) -> Robot:
     return load_robot({"urdf": str(root / "hrp2.urdf"), "srdf": str(root / "hrp2.srdf")})
 
 
@@ -38,5 +38,5 @@ def test_an_edited_collision_mesh_changes_the_proxies_cache_key(tmp_path):
     body = root / "meshes" / "BODY.stl"
     _shift_stl(body, 0.001)
     robot = _hrp2(root)
-    assert body in mesh_files(robot.collision_model())  # type: ignore[attr-defined]
+    assert body in mesh_files(robot.collision_model())
     assert _cache_key(robot) != key

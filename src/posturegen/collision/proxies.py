@@ -302,11 +302,13 @@ def mesh_files(geometry: pin.GeometryModel) -> list[Path]:
     return sorted(p for p in paths if p.is_absolute() and p.is_file())
 
 
-def robot_spheres(robot: Robot, rule: PairRule) -> tuple[list[Sphere], dict[str, Any]]:
+def robot_spheres(
+    robot: Robot, rule: PairRule, key: str | None = None
+) -> tuple[list[Sphere], dict[str, Any]]:
     """The robot's proxies (:func:`posturegen.collision.proxy_fit.fit_robot`), fitted once and
-    cached
-    on disk (:func:`cache_dir`); and the fit's report."""
-    path = cache_dir() / f"{_cache_key(robot)}.json"
+    cached on disk (:func:`cache_dir`) under ``key`` (default: :func:`_cache_key`); and the
+    fit's report."""
+    path = cache_dir() / f"{key or _cache_key(robot)}.json"
     if path.is_file():
         try:
             raw = json.loads(path.read_text())
@@ -351,24 +353,26 @@ def proxy_model(robot: Robot) -> ProxyModel:
         return cached
     model = robot.model
     rule = pair_rule(model, robot.collision_model(), str(robot.srdf) if robot.srdf else None)
-    spheres, report = robot_spheres(robot, rule)
+    key = _cache_key(robot)  # the meshes hashed once for both disk caches
+    spheres, report = robot_spheres(robot, rule, key)
     joints = sorted({s.joint_id for s in spheres})
     pairs = [
         (a, b) for i, a in enumerate(joints) for b in joints[i + 1 :] if rule.reason(a, b) is None
     ]
     joint_pairs = np.array(pairs, dtype=int).reshape(-1, 2)
-    clearance = _stored_clearance(robot, spheres, joint_pairs, rule.reference_q)
+    clearance = _stored_clearance(key, robot, spheres, joint_pairs, rule.reference_q)
     pm = ProxyModel(spheres, joint_pairs, clearance, rule, limbs(model), report)
     robot._proxy_model = pm
     return pm
 
 
 def _stored_clearance(
-    robot: Robot, spheres: list[Sphere], joint_pairs: np.ndarray, q: np.ndarray
+    key: str, robot: Robot, spheres: list[Sphere], joint_pairs: np.ndarray, q: np.ndarray
 ) -> np.ndarray:
     """:func:`reference_clearance`, cached on disk beside the proxies (a process's first
-    collision call: Talos 0.1 s), keyed on them, the pairs, q and this module's source."""
-    h = hashlib.sha1(_cache_key(robot).encode())
+    collision call: Talos 0.1 s), keyed on the proxies' ``key`` (:func:`_cache_key`), their
+    spheres, the pairs, q and this module's source."""
+    h = hashlib.sha1(key.encode())
     for part in (joint_pairs.tobytes(), np.asarray(q, dtype=float).tobytes()):
         h.update(part)
     h.update(Path(__file__).read_bytes())
