@@ -98,7 +98,7 @@ def test_a_bad_codegen_variable_is_a_one_line_error(monkeypatch, tmp_path, capsy
     with pytest.raises(InputError) as err:
         codegen.resolve_mode(None)
     assert str(err.value) == (
-        "$POSTUREGEN_CODEGEN: unknown codegen mode 'fast' (use one of: auto, sync, off)"
+        "$POSTUREGEN_CODEGEN: unknown codegen mode 'fast' (use one of: auto, sync, background, off)"
     )
     _CACHE.clear()  # a structure compiled before would not look at the variable
     code = main(["solve", str(_demo_dir() / "stand-reach.yaml"), "--out", str(tmp_path)])
@@ -107,25 +107,46 @@ def test_a_bad_codegen_variable_is_a_one_line_error(monkeypatch, tmp_path, capsy
 
 
 @needs_cc
-def test_auto_builds_after_reuse_and_matches_the_virtual_machine(cache):
+def test_auto_compiles_before_the_first_solve_and_matches_the_virtual_machine(cache):
+    """Mode auto: a structure's first solve waits for its library and runs it; the same
+    iterates as the virtual machine."""
     reference = solve(_problem("off"))
+    builds = len(codegen.BUILDS)
     first = _problem("auto")
     r1 = solve(first)
-    compiled = first.compile()
-    assert not compiled.library and codegen.pending() == []  # one use: no build
-    assert not codegen.library_path(compiled.library_key).exists()
-    solve(_problem("auto", target=[0.35, -0.45, 1.0]))  # second use: queued in the background
-    assert compiled.library_key in codegen.pending() or compiled.library
-    assert codegen.wait(timeout=300)
-    assert codegen.library_path(compiled.library_key).is_file()
-    r3 = solve(_problem("auto"))
-    assert compiled.library  # switched to the compiled library
-    for r in (r1, r3):
-        assert r.success, r.message
+    assert first.compile().library and len(codegen.BUILDS) == builds + 1
+    assert not codegen.BUILDS[-1].background
+    r2 = solve(_problem("auto"))
+    assert len(codegen.BUILDS) == builds + 1  # built once
+    for r in (r1, r2):
+        assert r.success and r.generated_c, r.message
         assert r.iterations == reference.iterations
         assert np.max(np.abs(r.q - reference.q)) <= 1e-9
         scale = max(1.0, float(np.max(np.abs(reference.torques))))
         assert np.max(np.abs(r.torques - reference.torques)) <= 1e-9 * scale
+
+
+@needs_cc
+def test_background_builds_at_the_first_use_while_the_virtual_machine_solves(cache, monkeypatch):
+    """Mode background: the first solve runs the virtual machine and queues the build; once
+    built, the next solve switches to the library, with the same posture."""
+    monkeypatch.setattr(codegen, "HOT_FLAGS", ("-O0", "-DBACKGROUND"))  # a key of its own
+    _CACHE.clear()
+    reference = solve(_problem("off", torque_cost=True))
+    first = _problem("background", torque_cost=True)
+    r1 = solve(first)
+    compiled = first.compile()
+    assert not r1.generated_c
+    assert (
+        compiled.library_key in codegen.pending()
+        or codegen.library_path(compiled.library_key).is_file()
+    )
+    assert codegen.wait(timeout=300)
+    r2 = solve(_problem("background", torque_cost=True))
+    assert compiled.library and r2.generated_c
+    for r in (r1, r2):
+        assert r.success and r.iterations == reference.iterations
+        assert np.max(np.abs(r.q - reference.q)) <= 1e-9
     assert codegen.BUILDS[-1].background
 
 

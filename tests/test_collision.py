@@ -590,13 +590,13 @@ def test_collision_runs_start_ipopt_with_their_barrier_and_regularization(monkey
 
     solve_module = sys.modules["posturegen.solver.solve"]
     seen = []
-    run = solve_module._run_ipopt
+    run = solve_module.run_nlp
 
     def spy(problem, *args, **kwargs):
         seen.append(problem.solver_options.ipopt())
         return run(problem, *args, **kwargs)
 
-    monkeypatch.setattr(solve_module, "_run_ipopt", spy)
+    monkeypatch.setattr(solve_module, "run_nlp", spy)
     data = copy.deepcopy(STAND)
     data["options"]["self_collision"] = True
     problem = problem_from_dict(data)

@@ -17,7 +17,8 @@ from hypothesis import strategies as st
 from posturegen import problem_from_dict
 from posturegen.cli import _demo_dir
 from posturegen.collision.proxies import proxy_model
-from posturegen.collision.rows import CollisionTerm, Layout
+from posturegen.collision.rows import CollisionTerm
+from posturegen.collision.slots import Capacity
 from posturegen.model.geometry import ConvexPolygon
 from posturegen.solver.fingerprint import NotEncodable, encode, structure_fingerprint
 from posturegen.solver.problem import Program
@@ -136,17 +137,16 @@ def test_the_robot_model_is_in_the_fingerprint():
     assert _fingerprint(problem) != base
 
 
-def test_collision_rows_fingerprint_their_pair_list():
-    """The layout names joint pairs; where their rows and clearances go is the proxy
-    model's pair list."""
+def test_collision_rows_fingerprint_their_links_rows_and_chains():
+    """The collision program's structure is its capacity; which links its slots pick from,
+    its rows' pairs of limbs and the links' chains are the proxy model's: a model whose limbs
+    differ gives the same key and another fingerprint."""
     problem = _problem()
     pm = proxy_model(problem.robot)
-    a, b = (int(v) for v in pm.joint_pairs[0])
-    term = CollisionTerm(pm, (), (), [], 0.005, Layout(((a, b, 16),)))
+    term = CollisionTerm(pm, (), (), [], 0.005, Capacity(16, 0))
     other = copy.copy(pm)
-    other.joint_pairs = pm.joint_pairs[::-1].copy()
-    moved = copy.copy(term)
-    moved.pm = other
+    other.limb = None  # every joint its own limb: a row per pair of links
+    moved = CollisionTerm(other, (), (), [], 0.005, Capacity(16, 0))
     assert term.key() == moved.key()
     assert _digest(term.fingerprint()) != _digest(moved.fingerprint())
 

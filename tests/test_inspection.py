@@ -11,7 +11,7 @@ import yaml
 from posturegen._cache import BoundedCache
 from posturegen.cli import _demo_dir, main
 from posturegen.io.problem_file import problem_from_dict
-from posturegen.solver.inspection import describe, initial_collision_term
+from posturegen.solver.inspection import describe, initial_collision_term, solver_line
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
 # 1.4 cm from the right hand's proxies at the initial posture: its sphere-box pairs are near
@@ -44,7 +44,7 @@ def test_inspect_shows_the_collision_blocks(tmp_path, capsys):
     before = int(re.search(r"^constraints: (\d+)$", without, re.MULTILINE)[1])
     assert total == before + rows["collision.env"] + rows["collision.self"]
     assert "obstacle 'box'" in with_box and "the solid under surface 'ground'" in with_box
-    assert "rows come and go with the active set" in with_box
+    assert "parameters of one program" in with_box
     assert "collision" not in without
 
 
@@ -56,15 +56,15 @@ def test_the_rows_shown_are_those_of_the_first_ipopt_run(monkeypatch):
     # no pairs from earlier solves
     monkeypatch.setattr(solve_module, "_LEARNED", BoundedCache("learned", 64))
     first: list[dict[str, int]] = []
-    real = solve_module._run_ipopt
+    real = solve_module.run_nlp
 
     def spy(p: object, *args: object, **kwargs: object) -> object:
-        run = real(p, *args, **kwargs)
+        runs = real(p, *args, **kwargs)
         if not first:
-            first.append({n: s.stop - s.start for n, s in run.compiled.g_index.items()})
-        return run
+            first.append({n: s.stop - s.start for n, s in runs[-1].compiled.g_index.items()})
+        return runs
 
-    monkeypatch.setattr(solve_module, "_run_ipopt", spy)
+    monkeypatch.setattr(solve_module, "run_nlp", spy)
     solve_module.solve(problem_from_dict(data))
     assert first[0] == {n: k for n, k in shown.items() if n in first[0]}
     assert first[0]["collision.env"] == shown["collision.env"]
@@ -74,4 +74,23 @@ def test_the_rows_shown_are_those_of_the_first_ipopt_run(monkeypatch):
 def test_no_collision_rows_without_avoidance():
     problem = problem_from_dict(_with([]))
     assert initial_collision_term(problem) is None
-    assert describe(problem) == problem.summary()
+    assert describe(problem) == problem.summary() + "\n" + solver_line(problem.solver_options)
+
+
+def test_inspect_says_which_solver_runs(tmp_path, capsys, monkeypatch):
+    monkeypatch.delenv("POSTUREGEN_SOLVER", raising=False)
+    path = tmp_path / "plain.yaml"
+    data = _with([])
+    path.write_text(yaml.safe_dump(data))
+    assert main(["inspect", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "solver: auto: posturegen's SQP (QP: daqp), then IPOPT from the same start" in out
+    data["options"]["solver"] = {"method": "ipopt"}
+    path.write_text(yaml.safe_dump(data))
+    assert main(["inspect", str(path)]) == 0
+    assert "solver: ipopt: IPOPT" in capsys.readouterr().out
+    monkeypatch.setenv("POSTUREGEN_SOLVER", "sqp")
+    data["options"]["solver"] = {"qp": "proxsuite"}
+    path.write_text(yaml.safe_dump(data))
+    assert main(["inspect", str(path)]) == 0
+    assert "solver: sqp: posturegen's SQP (QP: proxsuite)" in capsys.readouterr().out

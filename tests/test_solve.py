@@ -214,13 +214,16 @@ def test_posture_reference_is_put_inside_the_limits(lo, width, t):
 def test_a_reference_on_a_limit_no_longer_slows_ipopt_down(monkeypatch):
     """Talos' grippers sit on their upper limit in half-sitting: with the posture reference
     there, the optimum is a degenerate active bound and IPOPT's steps halve each iteration; a
-    reference 1 cm inside converges quadratically (12 instead of 16 iterations here)."""
+    reference 1 cm inside converges quadratically (12 instead of 16 iterations here). (The
+    SQP, an active-set method, takes 5 either way.)"""
     import posturegen.terms.costs as costs
 
     runs = {}
+    data = copy.deepcopy(STAND)
+    data["options"]["solver"] = {"method": "ipopt"}
     for inset in (0.0, costs.REFERENCE_INSET):
         monkeypatch.setattr(costs, "REFERENCE_INSET", inset)
-        runs[inset] = solve(problem_from_dict(copy.deepcopy(STAND)))
+        runs[inset] = solve(problem_from_dict(copy.deepcopy(data)))
         assert runs[inset].success, runs[inset].message
     plain, inset = runs[0.0], runs[costs.REFERENCE_INSET]
     assert inset.iterations <= plain.iterations - 3
@@ -242,7 +245,9 @@ def test_a_run_that_does_not_converge_restarts_from_the_torque_relaxed_solution(
         lambda p, x0, _: (p.torque_limit_scale, x0 is not None),
     )
     monkeypatch.setattr(solve_module, "_solve_continued", step)
-    problem = problem_from_dict(copy.deepcopy(STAND))
+    data = copy.deepcopy(STAND)
+    data["options"]["solver"] = {"method": "ipopt"}  # one run per step (auto: SQP, IPOPT)
+    problem = problem_from_dict(data)
     result = solve(problem)
     scale = solve_module.TORQUE_CONTINUATION
     assert calls == [(1.0, False), (scale, False), (1.0, True)]
@@ -329,13 +334,13 @@ def test_a_call_budget_starts_no_run_once_spent(monkeypatch, result):
 
     solve_module = sys.modules["posturegen.solver.solve"]
     runs: list[int] = []
-    run_ipopt = solve_module._run_ipopt
+    run_nlp = solve_module.run_nlp
 
     def counted(*args, **kwargs):
         runs.append(1)
-        return run_ipopt(*args, **kwargs)
+        return run_nlp(*args, **kwargs)
 
-    monkeypatch.setattr(solve_module, "_run_ipopt", counted)
+    monkeypatch.setattr(solve_module, "run_nlp", counted)
     data = copy.deepcopy(STAND)
     data["options"]["self_collision"] = True
     data["options"]["solver"] = {"max_iter": 3}
@@ -362,7 +367,7 @@ def test_a_run_uses_only_what_is_left_of_the_call_budget():
     import dataclasses
 
     from posturegen.bench_reach import stances_family
-    from posturegen.solver.solve import BUDGET_STEP
+    from posturegen.solver.runs import BUDGET_STEP
 
     problem = list(stances_family(29, 0))[28]
     problem.solver_options = dataclasses.replace(

@@ -114,14 +114,14 @@ def test_a_start_with_multipliers_warm_starts_ipopt_from_its_own_barrier(solved,
 
     problem, result = solved
     seen: list[dict] = []
-    run_ipopt = S._run_ipopt
+    run_nlp = S.run_nlp
 
     def recording(program, *args, **kwargs):
-        run = run_ipopt(program, *args, **kwargs)
-        seen.append(run.compiled.ipopt_options)
-        return run
+        runs = run_nlp(program, *args, **kwargs)
+        seen.append(runs[-1].compiled.ipopt_options)
+        return runs
 
-    monkeypatch.setattr(S, "_run_ipopt", recording)
+    monkeypatch.setattr(S, "run_nlp", recording)
     warm = solve(_problem([0.31, -0.29, 0.9]), start=result)
     assert warm.success, warm.message
     assert seen[0]["ipopt.warm_start_init_point"] == "yes"

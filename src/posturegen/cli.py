@@ -8,21 +8,27 @@ Exit codes: 0 verified success; 1 no posture found (the file is still written, s
 from __future__ import annotations
 
 import argparse
+import contextlib
+import dataclasses
 import importlib.resources
 import importlib.util
 import json
+import os
 import shutil
 import sys
+import tempfile
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import asdict
 from pathlib import Path
+from typing import TypeVar
 
 from .batch.bench import DEFAULT_FAMILY, ScalingRow, batch_scaling, machine_line, table
 from .batch.command import batch_to_dir
 from .batch.sources import read_sources
 from .bench import FAMILIES, FamilyReport, comparison_lines, run_families
+from .bench_cold import COLD_FAMILIES, COLD_SEED, cold_table, run_cold, run_peer
 from .bench_planner import PlannerReport, run_planner_family
 from .bench_reach import PLANNER_FAMILIES
 from .bench_table import results_table, write_markdown
@@ -34,6 +40,7 @@ from .io.problem_file import load_problem, read_yaml
 from .planner.command import add_parser as add_plan_parser
 from .solver.diagnose import solve_diagnosed
 from .solver.inspection import describe
+from .solver.problem import METHODS
 from .verify import verify_file
 
 EXIT_OK, EXIT_NOT_FOUND, EXIT_INPUT = 0, 1, 2
@@ -243,6 +250,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
             raise PosturegenError(f"--family: unknown family '{name}' ({hint})")
     if args.batch:
         return _bench_batch(args)
+    if args.cold:
+        return _bench_cold(args)
     args.n = 100 if args.n is None else args.n
     before = machine_line()
 
@@ -253,19 +262,99 @@ def cmd_bench(args: argparse.Namespace) -> int:
             print(f"    failed {failure}")
 
     classic = [name for name in names if name in FAMILIES]
-    reports = run_families(classic, args.n, args.seed, args.jit, done=show)
-    for line in comparison_lines(reports):
-        print(line)
-    planner = []
-    for name in (name for name in names if name in PLANNER_FAMILIES):
-        planner.append(run_planner_family(name, args.n, args.seed, args.jit))
-        show(planner[-1])
+    solvers = _solvers(args.solver)
+    reports: list[FamilyReport] = []
+    planner: list[PlannerReport] = []
+    for solver in solvers:
+        with _solver_env(solver):
+            ran = run_families(classic, args.n, args.seed, args.jit, done=show)
+            for line in comparison_lines(ran):
+                print(line)
+            reports += [_labelled(r, solver, solvers) for r in ran]
+            for name in (name for name in names if name in PLANNER_FAMILIES):
+                rep = run_planner_family(name, args.n, args.seed, args.jit)
+                show(rep)
+                planner.append(_labelled(rep, solver, solvers))
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps([asdict(r) for r in reports + planner], indent=1))
     if args.markdown:
         machine = f"{before} (after: load {machine_line().rsplit('load average ', 1)[1]})"
         write_markdown(args.markdown, results_table(machine, args.jit, reports, planner))
+    return EXIT_OK
+
+
+def _solvers(value: str) -> list[str]:
+    """--solver's list (comma-separated), each checked."""
+    solvers = [v.strip() for v in value.split(",") if v.strip()]
+    for solver in solvers:
+        if solver not in METHODS:
+            raise PosturegenError(
+                f"--solver: unknown solver '{solver}' (use {', '.join(METHODS)}, or several "
+                "separated by commas)"
+            )
+    return solvers or ["auto"]
+
+
+@contextlib.contextmanager
+def _solver_env(solver: str) -> Iterator[None]:
+    """$POSTUREGEN_SOLVER set to ``solver`` (the families' problems leave method unset; the
+    fresh processes of the planner and never-seen passes inherit it)."""
+    previous = os.environ.get("POSTUREGEN_SOLVER")
+    os.environ["POSTUREGEN_SOLVER"] = solver
+    try:
+        yield
+    finally:
+        if previous is None:
+            os.environ.pop("POSTUREGEN_SOLVER", None)
+        else:
+            os.environ["POSTUREGEN_SOLVER"] = previous
+
+
+R = TypeVar("R")
+
+
+def _labelled(report: R, solver: str, solvers: list[str]) -> R:
+    """``report`` with the solver after its family's name when the run compares solvers."""
+    if len(solvers) < 2:
+        return report
+    return dataclasses.replace(report, family=f"{report.family} [{solver}]")  # type: ignore[type-var]
+
+
+def _bench_cold(args: argparse.Namespace) -> int:
+    """posturegen bench --cold: the collision families on problems never seen, each in a
+    fresh process with an empty cache, timed from the first call; with --peer, the same
+    problems solved by the peer script (tools/drake_peer.sh) in the same run."""
+    names = args.family or list(COLD_FAMILIES)
+    for name in names:
+        if name not in COLD_FAMILIES:
+            raise PosturegenError(f"--family: --cold runs the families {', '.join(COLD_FAMILIES)}")
+    n = 50 if args.n is None else args.n
+    before = machine_line()
+    print(f"never-seen pass, {n} problems per family, seed {COLD_SEED + args.seed}: {before}")
+    folder = Path(tempfile.mkdtemp(prefix="posturegen-peer-"))
+    reports, peers = [], []
+    solvers = _solvers(args.solver)
+    for name in names:
+        problems = folder / f"{name}.jsonl" if args.peer else None
+        for solver in solvers:
+            with _solver_env(solver):
+                report = run_cold(name, n, args.seed, problems)
+            reports.append(_labelled(report, solver, solvers))
+            print(reports[-1].line(), flush=True)
+            for failure in reports[-1].failures[:5]:
+                print(f"    failed {failure}")
+        if args.peer and problems is not None:
+            for peer in run_peer(args.peer, problems, folder / f"{name}.peer.jsonl"):
+                peers.append(peer)
+                print(peer.line(), flush=True)
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps([asdict(r) for r in reports + peers], indent=1))
+    if args.markdown:
+        after = machine_line().rsplit("load average ", 1)[1]
+        head = f"Measured on {before} (after: load {after}); {n} problems per family."
+        write_markdown(args.markdown, [head, "", *cold_table(reports, peers)], "bench-cold")
     return EXIT_OK
 
 
@@ -325,10 +414,27 @@ def _add_bench_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--jit", action="store_true", help="compile the solvers to C first (needs gcc)")
     p.add_argument(
+        "--solver",
+        default="auto",
+        help="the solver of every problem: auto (the SQP, IPOPT when it fails), sqp or ipopt; "
+        "several separated by commas run one after the other (sqp,ipopt)",
+    )
+    p.add_argument(
         "--batch",
         action="store_true",
         help="postures/s of one family (default talos-stand-reach) in-process, on 1..N local "
         "workers and on Ray",
+    )
+    p.add_argument(
+        "--cold",
+        action="store_true",
+        help="the collision families on problems never seen: each in a fresh process with an "
+        "empty cache, timed from its first call (default 50 problems each)",
+    )
+    p.add_argument(
+        "--peer",
+        metavar="COMMAND",
+        help="with --cold: also solve the same problems with this peer (tools/drake_peer.sh)",
     )
     p.set_defaults(func=cmd_bench)
 

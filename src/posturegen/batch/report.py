@@ -13,7 +13,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
-from ..solver.solve import _IPOPT_OK, Result
+from ..solver.runs import _IPOPT_OK
+from ..solver.solve import Result
 from .jobs import BatchError, BatchItem
 
 INDEX_FILE = "batch.json"

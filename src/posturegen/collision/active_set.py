@@ -23,7 +23,8 @@ from ..terms.contacts import FixedContact
 from .boxes import CollisionOptions, EnvBox, env_boxes, excluded_joint_ids, row_box_distances
 from .mesh_check import placed_intersections
 from .proxies import Close, ProxyModel, closest, proxy_model
-from .rows import CollisionTerm, Layout
+from .rows import CollisionTerm
+from .slots import SELF_SLOT_BLOCK, Capacity, SelfFill
 from .stance_hold import CAP_REACH, stance_caps
 
 # the closest sphere pairs of each pair of links, and spheres of each link near each box, that
@@ -85,8 +86,10 @@ class ActiveSet:
     self_pairs: set[tuple[int, int]] = field(default_factory=set)
     env_pairs: set[tuple[int, int]] = field(default_factory=set)
     caps: np.ndarray | float = np.inf  # (P,) [m] holds' caps (stance_hold.stance_caps)
-    # the slots of the rows (rows.Layout): grows with the pairs held, never shrinks
-    layout: Layout = field(default_factory=Layout)
+    # the slots of the rows (slots.Capacity): grows with the pairs held, never shrinks
+    capacity: Capacity = field(default_factory=Capacity)
+    # the sphere centres (S, 3) and the margin of the last scan (term() lets go of far pairs)
+    _last: tuple[np.ndarray, float] | None = field(default=None, repr=False)
 
     @classmethod
     def of(cls, problem: Any) -> ActiveSet:
@@ -122,6 +125,7 @@ class ActiveSet:
         pairs within 5 cm are thousands, their search was 3/4 of a scan)."""
         pin.forwardKinematics(self.model, self.data, q)
         centers = self.pm.centers_world(self.model, self.data)
+        self._last = (centers, margin)  # where term() may let go of far pairs
         out = Scan()
         reference = self.pm.pair_clearance(margin)  # (P,) [m] the holds without the caps
         clearance = np.minimum(reference, self.caps)
@@ -149,17 +153,79 @@ class ActiveSet:
 
     def term(self, margin: float) -> CollisionTerm:
         """The collision rows of the pairs held now, ``margin`` [m] apart, in the slots of
-        ``layout`` (grown to hold them)."""
+        ``capacity``. Pairs that no longer fit are first let go of where they are far at the
+        last posture scanned (see :meth:`_let_go`); only then is the capacity doubled."""
+        if not self._fits():
+            self._let_go()
+        if not self._fits():
+            self._trim()
         term = CollisionTerm(
             self.pm,
             tuple(sorted(self.self_pairs)),
             tuple(sorted(self.env_pairs)),
             self.boxes,
             margin,
-            self.layout,
+            self.capacity,
+            self_collision=self.options.self_collision,
         )
-        self.layout = term.layout
+        self.capacity = term.capacity
         return term
+
+    def _let_go(self) -> None:
+        """Drop the held pairs that are now farther than their activation (self pairs:
+        ``activation`` beyond their hold; sphere-box pairs: ``environment_activation`` beyond
+        the margin) at the last posture scanned: the ones an active set gathered on its way
+        and no longer needs. A solve that meets many pairs (Talos reaching into its belly,
+        tightening its margin twice: 149 blocks of 16) stays in its program instead of
+        compiling one twice as large."""
+        if self._last is None:
+            return
+        centers, margin = self._last
+        if self.self_pairs:
+            held = np.minimum(self.pm.pair_clearance(margin), self.caps)
+            ij = np.array(sorted(self.self_pairs), dtype=int)
+            link = np.array([self.pm.link_index(*self.pm.joint_ids[p]) for p in ij], dtype=int)
+            d = self.pm.distances(centers, ij[:, 0], ij[:, 1])
+            keep = d < held[link] + self.options.activation
+            self.self_pairs = {(int(i), int(j)) for i, j in ij[keep]}
+        if self.env_pairs and self.boxes:
+            d_env = row_box_distances(self.pm, centers, self.boxes)
+            near = margin + self.options.environment_activation
+            self.env_pairs = {(i, k) for i, k in self.env_pairs if d_env[i, k] < near}
+
+    def _fits(self) -> bool:
+        """Whether the pairs held fit the capacity."""
+        needs = SelfFill.of(self.pm, tuple(sorted(self.self_pairs))).blocks
+        return needs <= self.capacity.self_blocks and len(self.env_pairs) <= (
+            self.capacity.env_slots
+        )
+
+    def _trim(self) -> None:
+        """Keep, of each pair of links, the SELF_SLOT_BLOCK pairs closest at the last posture
+        scanned (one block; the violated ones among them), and of each link and box the
+        ENV_PER_LINK closest: what a round holds from scratch. A pair trimmed that a later
+        posture violates comes back in the next round; only when even these do not fit does
+        the capacity double."""
+        if self._last is None:
+            return
+        centers, _margin = self._last
+        if self.self_pairs:
+            ij = np.array(sorted(self.self_pairs), dtype=int)
+            link = np.array([self.pm.link_index(*self.pm.joint_ids[p]) for p in ij], dtype=int)
+            d = self.pm.distances(centers, ij[:, 0], ij[:, 1])
+            kept = closest(Close(ij[:, 0], ij[:, 1], link, d), SELF_SLOT_BLOCK)
+            self.self_pairs = set(kept.tuples())
+        if self.env_pairs and self.boxes:
+            d_env = row_box_distances(self.pm, centers, self.boxes)
+            pairs = sorted(self.env_pairs, key=lambda p: d_env[p])
+            count: dict[tuple[int, int], int] = {}
+            kept_env = set()
+            for i, k in pairs:
+                group = (int(self.pm.joint_ids[i]), k)
+                count[group] = count.get(group, 0) + 1
+                if count[group] <= ENV_PER_LINK:
+                    kept_env.add((i, k))
+            self.env_pairs = kept_env
 
     def _posture_key(self, q: np.ndarray, slack: np.ndarray) -> tuple[Any, ...]:
         """The key of a scan's result at posture q with ``slack`` (P,) [m] over this set's

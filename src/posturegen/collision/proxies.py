@@ -78,6 +78,9 @@ class ProxyModel:
     # (njoints,) limb of each joint (see limbs()); None: every joint its own limb
     limb: np.ndarray | None = None
     report: dict[str, Any] = field(default_factory=dict)  # the fit's refinement report
+    # each joint's chain: the actuated coordinates (indices into qj) of the joints between it
+    # and the base, sorted (see chains())
+    chains: tuple[tuple[int, ...], ...] = ()
 
     def __post_init__(self) -> None:
         groups = _grouped(self.spheres)  # spheres reordered: joints and groups contiguous
@@ -361,7 +364,7 @@ def proxy_model(robot: Robot) -> ProxyModel:
     ]
     joint_pairs = np.array(pairs, dtype=int).reshape(-1, 2)
     clearance = _stored_clearance(key, robot, spheres, joint_pairs, rule.reference_q)
-    pm = ProxyModel(spheres, joint_pairs, clearance, rule, limbs(model), report)
+    pm = ProxyModel(spheres, joint_pairs, clearance, rule, limbs(model), report, chains(model))
     robot._proxy_model = pm
     return pm
 
@@ -411,6 +414,15 @@ def reference_clearance(
         (ca, ra), (cb, rb) = world[int(a)], world[int(b)]
         out[k] = (np.linalg.norm(ca[:, None] - cb[None], axis=2) - ra[:, None] - rb).min()
     return out
+
+
+def chains(model: pin.Model) -> tuple[tuple[int, ...], ...]:
+    """Per joint id, the actuated coordinates (indices into qj) of the joints between it and
+    the base, sorted (the free flyer is the base; the universe and the base have none)."""
+    return tuple(
+        tuple(sorted(model.joints[int(k)].idx_v - 6 for k in model.supports[j] if int(k) > 1))
+        for j in range(model.njoints)
+    )
 
 
 def limbs(model: pin.Model) -> np.ndarray:

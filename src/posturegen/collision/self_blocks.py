@@ -1,30 +1,34 @@
-"""Self rows built from blocks: the SELF_SLOT_BLOCK sphere-pair slots of a joint pair are one
-CasADi function, called in the program (a call node, never inlined) once per block.
+"""Self rows: one per pair of limbs (fixed per robot), each the smooth minimum of blocks of
+sphere-pair slots whose links are parameters (:mod:`posturegen.collision.slots`). Each
+function of the rows is one call per block of the capacity: the block's link poses,
+compressed twist Jacobians and chain columns gathered from the tables of every link that
+carries spheres (by the parameter: a gather in the generated C), its work done by an SX core
+behind a switch (a free block costs a branch), its results added where its row and its links'
+chains are (a scatter): the program's code does not grow with the active set, and barely
+with the capacity.
 
-A block of slots e (sphere i on joint a, sphere j on joint b) reduces its distances
-v_e = |c_i - c_j| - (r_i + r_j) - m (m the joint pair's held clearance) to their smooth
-minimum u = softmin_β(v) (β = SOFT_MIN_BETA), and a row, one per pair of limbs, is the smooth
-minimum of its blocks' u and a constant cap. This is the smooth minimum over all its slots:
-exp(-βu) = Σ_e exp(-βv_e), so the row is unchanged. The block also gives, in the twist
-coordinates of its two links (A_i = [I, -[ρ_i]×], ρ_i = R_a s_i, w_e = softmax(-βv)_e,
-n_e = (c_i - c_j)/|c_i - c_j|):
+A block of slots e (sphere i on link a, sphere j on link b) has the smooth minimum
+u = softmin_β(v) (β = SOFT_MIN_BETA) of its distances v_e = |c_i - c_j| - (r_i + r_j) - m,
+m the joint pair's held clearance; row k is softmin_β over its blocks, computed with one
+shift for all rows (CLAMP). Derivatives, in the twist coordinates of a block's two links
+(A_i = [I, -[ρ_i]×], ρ_i = R_a s_i, w_e = softmax(-βv)_e, n_e = (c_i - c_j)/|c_i - c_j|):
 
-- the wrenches ``wa = Σ w_e A_iᵀ n_e`` and ``wb = -Σ w_e A_jᵀ n_e`` (∇u = J_aᵀ wa + J_bᵀ wb);
-- the curvature ``Σ w_e A_iᵀ K_e A_j`` per pair of its links, K_e = (I - n nᵀ)/|u| - β n nᵀ
-  (that is ∇²_c v - β ∇_c v ∇_c vᵀ), with the sign of ∂v/∂c_i · ∂v/∂c_j;
+- the wrenches ``wa = Σ w_e A_iᵀ n_e`` and ``wb = -Σ w_e A_jᵀ n_e``: ∇u = J_aᵀ wa + J_bᵀ wb;
+- the curvature M = [[Caa, Cab], [Cabᵀ, Cbb]] with ``Cxy = Σ w_e A_xᵀ K_e A_y`` (signed),
+  K_e = (I - n nᵀ)/|u| - β n nᵀ, that is ∇²_c v - β∇_c v∇_c vᵀ;
 - the first-order weights ``G_a = Σ w_e n_e s_iᵀ`` and ``G_b = -Σ w_e n_e s_jᵀ`` (and F, the
   wrenches' forces) that weigh the kinematics' second derivatives.
 
-The row's Hessian is then Σ_b W_b Σ_e w_e (∇²v_e - β∇v_e∇v_eᵀ) + β∇r∇rᵀ with W = softmax over
-the blocks, exactly as for one smooth minimum over every slot. A program holds as many calls
-as blocks and the function's code once, so a new layout builds in a fraction of the time
-that writing every slot's expressions took, and its generated C is a small file.
+With ω_b a block's weight in its row, ∇row_k = Σ_b ω_b ∇u_b and ∇²(Σ λ_k row_k) =
+Σ_b μ_b [J_abᵀ M_b J_ab + kinematic terms] + Σ_k βλ_k ∇row_k∇row_kᵀ, μ_b = λ_k ω_b, each
+product taken on the links' chains (a link's twist Jacobian is zero outside the joints between
+it and the base). A block's derivatives run only when ω_b > WEIGHT_FLOOR, its curvature only
+when μ_b ≠ 0 too (an SQP's inactive rows cost nothing).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import casadi as ca
@@ -32,22 +36,25 @@ import casadi as ca
 from .._cache import memoize
 from ..model.kinematics import skew
 from ..terms.nlp import BlockDerivatives, BuildContext
-from .soft_min import SOFT_MIN_BETA, kinematic_hessian
+from .slots import DUMMY_GAP, FREE_ROW, SELF_SLOT_BLOCK, RowTable, index_rows
+from .soft_min import (
+    SOFT_MIN_BETA,
+    compressed,
+    kinematic_hessian,
+    map_columns,
+    scatter_sum,
+    switched,
+)
 
-# sphere-pair slots per block: a joint pair has a multiple of it
-SELF_SLOT_BLOCK = 16
-
-
-@dataclass(frozen=True)
-class Block:
-    """One call: row ``row``, joints a < b, the block's slot parameters (7, SELF_SLOT_BLOCK)
-    and the pair's clearance."""
-
-    row: int
-    a: int
-    b: int
-    slots: Any
-    clearance: Any
+# [m] the rows' smooth minima share one shift, the smallest distance of all held blocks m; a
+# block's u - m is clamped at CLAMP, so that exp(-β(u - m)) never underflows. A row whose
+# blocks are all that far above m reads m + CLAMP - log(n)/β, a lower bound of its distance
+# and positive (inactive): only rows that far apart from the closest one are read so.
+CLAMP = 0.5
+# a block whose weight in its row's smooth minimum is below this adds nothing to the row's
+# derivatives (its terms are that small relative to the row's own) and is skipped: a block
+# 2 cm above its row's smallest distance weighs exp(-β·0.02) = 2e-9, 4 cm 4e-18
+WEIGHT_FLOOR = 1e-12
 
 
 def _slot_geometry(pa: Any, Ra: Any, pb: Any, Rb: Any, P: Any, clearance: Any) -> dict[str, Any]:
@@ -90,8 +97,8 @@ def _wrenches(s: dict[str, Any]) -> tuple[Any, Any, Any]:
     return wa, wb, nw
 
 
-def _curvatures(s: dict[str, Any]) -> tuple[Any, Any, Any]:
-    """(Σ A_iᵀ X A_i, Σ A_iᵀ(-X)A_j, Σ A_jᵀ X A_j) (6, 6) with X = w_e K_e per slot."""
+def _curvature(s: dict[str, Any]) -> Any:
+    """M (12, 12) = [[Caa, Cab], [Cabᵀ, Cbb]], Cxy = Σ A_xᵀ (±w_e K_e) A_y."""
     out = [[ca.SX.zeros(3, 3) for _ in range(4)] for _ in range(3)]
     for e in range(s["normal"].shape[1]):
         nrm, length = s["normal"][:, e], s["length"][e]
@@ -106,117 +113,256 @@ def _curvatures(s: dict[str, Any]) -> tuple[Any, Any, Any]:
             Y = -sign * X @ right
             for k, value in enumerate((sign * X, Y, left @ (sign * X), left @ Y)):
                 acc[k] = acc[k] + value
-    return tuple(ca.vertcat(ca.horzcat(b[0], b[1]), ca.horzcat(b[2], b[3])) for b in out)  # type: ignore[return-value]
+    Caa, Cab, Cbb = (ca.vertcat(ca.horzcat(b[0], b[1]), ca.horzcat(b[2], b[3])) for b in out)
+    return ca.vertcat(ca.horzcat(Caa, Cab), ca.horzcat(Cab.T, Cbb))
 
 
-@memoize("self block functions", 4)
-def block_functions(n: int) -> dict[str, ca.Function]:
-    """The block's functions of (pa, Ra, pb, Rb, P (7, n), clearance), link poses in the rows'
-    frame: ``value`` -> u; ``first`` -> (u, wa, wb); ``second`` -> (u, wa, wb, Caa, Cab, Cbb,
-    Ga, Gb) (see the module doc)."""
-    pa, pb = ca.SX.sym("pa", 3), ca.SX.sym("pb", 3)
-    Ra, Rb = ca.SX.sym("Ra", 3, 3), ca.SX.sym("Rb", 3, 3)
-    P, clearance = ca.SX.sym("P", 7, n), ca.SX.sym("clearance")
-    args = [pa, Ra, pb, Rb, P, clearance]
-    s = _slot_geometry(*args)
+def _symbols(n: int, width: int) -> list[Any]:
+    """A block's SX arguments: its links' poses pa (3,), Ra (9,) (column-major), pb, Rb, its
+    slots P (7, n) and clearance, and (``width`` > 0) its links' compressed twist Jacobians
+    (12·width,: J_a (6, D) then J_b, column-major, each on its link's chain)."""
+    out = [ca.SX.sym("pa", 3), ca.SX.sym("Ra", 9), ca.SX.sym("pb", 3), ca.SX.sym("Rb", 9)]
+    out += [ca.SX.sym("P", 7, n), ca.SX.sym("clearance")]
+    return [*out, ca.SX.sym("J", 12 * width)] if width else out
+
+
+def _geometry(args: list[Any]) -> dict[str, Any]:
+    """:func:`_slot_geometry` of a block's SX arguments."""
+    pa, Ra, pb, Rb, P, clearance = args[:6]
+    return _slot_geometry(pa, ca.reshape(Ra, 3, 3), pb, ca.reshape(Rb, 3, 3), P, clearance)
+
+
+@memoize("self block values", 2)
+def _value_kernel(n: int) -> ca.Function:
+    """(whether the block joins links, then :func:`_symbols` without Jacobians) -> u, its
+    smooth minimum, run only for a block that joins links (else 0)."""
+    plain = _symbols(n, 0)
+    return switched(ca.Function("self_block_value", plain, [_geometry(plain)["u"]]))
+
+
+@memoize("self block kernels", 4)
+def _kernels(n: int, width: int, nz: int, rows: int, n_links: int) -> dict[str, ca.Function]:
+    """A block's derivatives on its links' chains with the indices where they go, each run
+    only when its first arguments say so (zeros at index 0 otherwise). Arguments:
+    :func:`_symbols`, then its row, its links ia, ib and their chains (2D,: PADDING beyond).
+
+    - ``first`` (its weight ω in its row first: run when ω > WEIGHT_FLOOR) -> ([J_aᵀwa,
+      J_bᵀwb] (2D,), their indices in the rows' Jacobian (R, nz));
+    - ``second`` (μ = λω, then ω: run when μ ≠ 0 and ω > WEIGHT_FLOOR) -> (the upper
+      triangle of μ·J_abᵀ M J_ab: its values on the links' chains (D(D+1) + D²,) and their
+      indices in the (nz, nz) Hessian, μ·[Fa, Fb, Ga, Gb] (24,), their indices in
+      [F (3N,), G (9N,)])."""
+    args = _symbols(n, width)
+    row, ia, ib, chain = (
+        ca.SX.sym("row"),
+        ca.SX.sym("ia"),
+        ca.SX.sym("ib"),
+        ca.SX.sym("c", 2 * width),
+    )
+    where = [row, ia, ib, chain]
+    s = _geometry(args)
     wa, wb, nw = _wrenches(s)
-    Caa, Cab, Cbb = _curvatures(s)
-    Ga, Gb = nw @ P[0:3, :].T, -nw @ P[3:6, :].T
+    J = ca.reshape(args[6], 6, 2 * width)
+    Ja, Jb = J[:, :width], J[:, width:]
+    mu = ca.SX.sym("mu")
+    g = ca.vertcat(Ja.T @ wa, Jb.T @ wb)
+    first = ca.Function("self_block_first", [*args, *where], [g, row + rows * chain])
+    M = mu * _curvature(s)
+    P = args[4]
+    ca_, cb = chain[:width], chain[width:]
+    Haa, Hbb = Ja.T @ M[0:6, 0:6] @ Ja, Jb.T @ M[6:12, 6:12] @ Jb
+    Hab = Ja.T @ M[0:6, 6:12] @ Jb
+    blocks, at_h = _upper_scatter(Haa, Hab, Hbb, ca_, cb, nz)
+    weights = mu * ca.vertcat(wa[0:3], wb[0:3], ca.vec(nw @ P[0:3, :].T), ca.vec(-nw @ P[3:6, :].T))
+    at_w = ca.vertcat(
+        3 * ia + ca.DM(range(3)),
+        3 * ib + ca.DM(range(3)),
+        3 * n_links + 9 * ia + ca.DM(range(9)),
+        3 * n_links + 9 * ib + ca.DM(range(9)),
+    )
+    second = ca.Function("self_block_second", [mu, *args, *where], [blocks, at_h, weights, at_w])
+    return {"first": switched(first), "second": switched(second)}
+
+
+def _upper_scatter(Haa: Any, Hab: Any, Hbb: Any, ca_: Any, cb: Any, n: int) -> tuple[Any, Any]:
+    """The block's curvature [[Haa, Hab], [Habᵀ, Hbb]] on the chains ``ca_``, ``cb`` (D,,
+    sorted, PADDING beyond) as values and flat (column-major) indices of the upper triangle
+    of the (n, n) Hessian: Haa's and Hbb's own upper triangles, and each entry of Hab at
+    (min, max) of its columns, twice on the diagonal (Hab and Habᵀ both land there). An
+    index built from PADDING falls beyond the matrix."""
+    D = Haa.shape[0]
+    values, index = [], []
+    for H, c in ((Haa, ca_), (Hbb, cb)):
+        for j in range(D):
+            for i in range(j + 1):
+                values.append(H[i, j])
+                index.append(c[i] + n * c[j])
+    for j in range(D):
+        for i in range(D):
+            lo, hi = ca.fmin(ca_[i], cb[j]), ca.fmax(ca_[i], cb[j])
+            values.append((1 + (ca_[i] == cb[j])) * Hab[i, j])
+            index.append(lo + n * hi)
+    return ca.vertcat(*values), ca.vertcat(*index)
+
+
+INDEX_NAMES = ("pose", "jacobian", "chain")
+
+
+class _Args:
+    """The MX symbols of the self rows' functions: the parameters (links (2, B), rows (B,),
+    slots (7, 16·B), clearances (B,), free rows (R,), then each block's indices, one matrix
+    per kind of :func:`~.slots.index_rows`) and the link tables: poses (12N,: each link's
+    position and rotation, column-major) and compressed twist Jacobians (6·D·N,)."""
+
+    def __init__(self, n_links: int, blocks: int, rows: int, width: int) -> None:
+        self.links, self.rows = ca.MX.sym("links", 2, blocks), ca.MX.sym("rows", blocks)
+        self.slots = ca.MX.sym("slots", 7, SELF_SLOT_BLOCK * blocks)
+        self.clear, self.free = ca.MX.sym("clear", blocks), ca.MX.sym("free", rows)
+        at = index_rows(width)
+        self.index = {
+            name: ca.MX.sym(f"at_{name}", at[name].stop - at[name].start, blocks)
+            for name in INDEX_NAMES
+        }
+        self.poses = ca.MX.sym("poses", 12 * n_links)
+        self.J_all = ca.MX.sym("J_all", 6 * width * n_links)
+        self.blocks, self.n_rows, self.width = blocks, rows, width
+
+    def params(self) -> list[Any]:
+        own = [self.links, self.rows, self.slots, self.clear, self.free]
+        return [*own, *(self.index[name] for name in INDEX_NAMES)]
+
+    def gathered(self, table: Any, name: str) -> Any:
+        """(size, B) each block's entries of ``table`` at its indices ``name``."""
+        rows = self.index[name]
+        return ca.reshape(table.get_nz(False, ca.vec(rows)), rows.shape[0], self.blocks)
+
+    def own(self) -> list[Any]:
+        """Every block's pa (3, B), Ra (9, B), pb, Rb, slots and clearance (1, B)."""
+        pose = self.gathered(self.poses, "pose")
+        return [
+            pose[0:3, :],
+            pose[3:12, :],
+            pose[12:15, :],
+            pose[15:24, :],
+            self.slots,
+            self.clear.T,
+        ]
+
+    def smooth_minima(self) -> tuple[Any, Any, Any]:
+        """(rows (R,), each block's weight in its row (1, B), its row (1, B), sanitized):
+        row k = softmin_β over its blocks' u_b with one shift m for all rows (the smallest
+        u), each u_b - m clamped at CLAMP (see the module doc); a free row FREE_ROW."""
+        joins = self.links[0, :] >= 0
+        u = map_columns(_value_kernel(SELF_SLOT_BLOCK), self.blocks)(joins, *self.own())
+        u = u + (1 - joins) * DUMMY_GAP
+        m = ca.mmin(u)
+        e = ca.exp(-SOFT_MIN_BETA * ca.fmin(u - m, CLAMP))
+        row = ca.fmax(self.rows.T, 0)  # a free block's: 0, where it adds 0
+        S = self.free + scatter_sum(self.n_rows, joins * e, row)
+        rows = self.free * FREE_ROW + (1 - self.free) * (m - ca.log(S) / SOFT_MIN_BETA)
+        weight = joins * e / ca.reshape(S.get_nz(False, ca.vec(row)), 1, self.blocks)
+        return rows, weight, row
+
+
+@memoize("self row values", 8)
+def rows_value(n_links: int, blocks: int, rows: int, width: int) -> ca.Function:
+    """(links (2, B), rows (B,), slots (7, 16·B), clearances (B,), free rows (R,), each
+    kind of indices (INDEX_NAMES), poses (12N,)) -> the rows (R,)."""
+    x = _Args(n_links, blocks, rows, width)
+    values, _, _ = x.smooth_minima()
+    return ca.Function("self_rows", [*x.params(), x.poses], [values], {"never_inline": True})
+
+
+@memoize("self row derivatives", 8)
+def rows_derivatives(
+    n_links: int, nz: int, blocks: int, rows: int, width: int
+) -> dict[str, ca.Function]:
+    """The rows' derivatives, functions of :func:`rows_value`'s arguments and the compressed
+    Jacobians (6·D·N,): ``first`` -> Jacobian (R, nz); ``second`` (λ (R,) last) -> (the upper
+    triangle of ∇²λᵀrows without the kinematics' second derivatives (nz, nz; its lower
+    triangle zero), F (3N,), G (9N,)) (see the module doc)."""
+    kernels = _kernels(SELF_SLOT_BLOCK, width, nz, rows, n_links)
+    x = _Args(n_links, blocks, rows, width)
+    lam = ca.MX.sym("lam", rows)
+    _, weight, row = x.smooth_minima()
+    links = ca.fmax(x.links, 0)
+    own = [
+        *x.own(),
+        x.gathered(x.J_all, "jacobian"),
+        row,
+        links[0, :],
+        links[1, :],
+        x.index["chain"],
+    ]
+    counts = weight > WEIGHT_FLOOR  # (1, B) the blocks whose derivatives run
+    g, at = map_columns(kernels["first"], blocks)(counts, *own)  # (2D, B) each
+    g = g * ca.repmat(weight, 2 * width, 1)
+    jac = ca.reshape(scatter_sum(rows * nz, g, at), rows, nz)
+    mu = ca.reshape(lam.get_nz(False, ca.vec(row)), 1, blocks) * weight
+    h, at_h, fg, at_fg = map_columns(kernels["second"], blocks)(counts * (mu != 0), mu, *own)
+    H = scatter_sum(nz * nz, h, at_h)
+    c = SOFT_MIN_BETA * lam.T
+    upper = map_columns(_rank_one(nz), rows)(c != 0, c, jac.T)  # (nz(nz+1)/2, R)
+    H = H + scatter_sum(nz * nz, upper, ca.repmat(_upper_index(nz), 1, rows))
+    H = ca.reshape(H, nz, nz)  # the upper triangle (the lower one is zero)
+    FG = scatter_sum(12 * n_links, fg, at_fg)
     opts = {"never_inline": True}
+    params = [*x.params(), x.poses, x.J_all]
     return {
-        "value": ca.Function(f"self_block{n}", args, [s["u"]], opts),
-        "first": ca.Function(f"self_block{n}_first", args, [s["u"], wa, wb], opts),
+        "first": ca.Function("self_rows_first", params, [jac], opts),
         "second": ca.Function(
-            f"self_block{n}_second", args, [s["u"], wa, wb, Caa, Cab, Cbb, Ga, Gb], opts
+            "self_rows_second", [*params, lam], [H, FG[: 3 * n_links], FG[3 * n_links :]], opts
         ),
     }
 
 
-def _arguments(state: Any, block: Block) -> list[Any]:
-    """The block's function arguments: its links' poses in ``state``, its slots, clearance."""
-    a, b = block.a, block.b
-    return [state.p[a], state.R[a], state.p[b], state.R[b], block.slots, block.clearance]
+def _upper_index(n: int) -> ca.DM:
+    """The flat (column-major) indices of the upper triangle of an (n, n) matrix, column
+    after column."""
+    return ca.DM([i + n * j for j in range(n) for i in range(j + 1)])
 
 
-def _row_weights(us: list[Any], cap: Any) -> tuple[Any, Any]:
-    """(softmin_β(us, cap), the weights W (len(us),) of the blocks)."""
-    U = ca.vertcat(*us, cap)
-    m = ca.mmin(U)
-    ex = ca.exp(-SOFT_MIN_BETA * (U - m))
-    total = ca.sum1(ex)
-    return m - ca.log(total) / SOFT_MIN_BETA, ex[: len(us)] / total
+@memoize("self row rank-one terms", 4)
+def _rank_one(nz: int) -> ca.Function:
+    """(whether c ≠ 0, c, g (nz,)) -> the upper triangle of c·ggᵀ (column after column), run
+    only when c ≠ 0 (a row whose multiplier is 0 adds nothing)."""
+    c, g = ca.SX.sym("c"), ca.SX.sym("g", nz)
+    upper = [c * g[i] * g[j] for j in range(nz) for i in range(j + 1)]
+    return switched(ca.Function("self_row_rank_one", [c, g], [ca.vertcat(*upper)]))
 
 
-def self_block_rows(
-    ctx: BuildContext, state: Any, blocks: list[Block], caps: list[Any]
+def link_tables(state: Any, links: list[int]) -> Any:
+    """The pose table of ``links`` (12N,): each link's position then rotation (column-major),
+    link after link."""
+    return ca.vertcat(*[ca.vertcat(state.p[L], ca.vec(state.R[L])) for L in links])
+
+
+def self_rows(
+    ctx: BuildContext, state: Any, table: RowTable, params: list[Any]
 ) -> tuple[Any, Callable[[], BlockDerivatives]]:
-    """The rows softmin_β(blocks' u, cap_k) (one per cap) in ``state`` (fixed base: z = qj),
-    and the function that builds their derivatives (see the module doc)."""
-    fns = block_functions(SELF_SLOT_BLOCK)
-    calls = [fns["value"](*_arguments(state, b)) for b in blocks]
-    values = [
-        _row_weights([u for u, b in zip(calls, blocks, strict=True) if b.row == k], cap)[0]
-        for k, cap in enumerate(caps)
-    ]
+    """The self rows of the blocks of ``params`` (links (2, B), rows (B,), slots (7, 16·B),
+    clearances (B,), free rows (R,), each kind of indices (INDEX_NAMES)) in ``state`` (fixed
+    base: z = qj), links among ``table.links`` (the joints that carry spheres); and the
+    function that builds their derivatives."""
+    links = [int(j) for j in table.links]
+    blocks, n_rows = params[1].shape[0], params[4].shape[0]
+    poses = link_tables(state, links)
+    values = rows_value(len(links), blocks, n_rows, table.width)(*params, poses)
 
     def build() -> BlockDerivatives:
-        return _derivatives(ctx, state, blocks, caps, fns)
+        J = ctx.kin.twist_jacobians(state, links, None)
+        columns = [list(c) for c in table.chains]
+        nz = ctx.joints.shape[0]
+        fns = rows_derivatives(len(links), nz, blocks, n_rows, table.width)
+        J_all = compressed([J[L] for L in links], columns, table.width)
+        jac = fns["first"](*params, poses, J_all)
+        lam = ca.SX.sym("lam", n_rows)
+        H, F, G = fns["second"](*params, poses, J_all, lam)
+        weights = {
+            L: (F[3 * n : 3 * n + 3], ca.reshape(G[9 * n : 9 * n + 9], 3, 3))
+            for n, L in enumerate(links)
+        }
+        Hk = kinematic_hessian(weights, state, J, ctx.joints)
+        return BlockDerivatives(z=ctx.joints, jacobian=jac, lam=lam, hessian=H + Hk)
 
-    return ca.vertcat(*values), build
-
-
-def _derivatives(
-    ctx: BuildContext,
-    state: Any,
-    blocks: list[Block],
-    caps: list[Any],
-    fns: dict[str, ca.Function],
-) -> BlockDerivatives:
-    """The rows' Jacobian (from the ``first`` calls) and the Hessian of λᵀrows (from the
-    ``second`` calls), in z = qj."""
-    z = ctx.joints
-    lam = ca.SX.sym("lam", len(caps))
-    links = sorted({b.a for b in blocks} | {b.b for b in blocks})
-    J = ctx.kin.twist_jacobians(state, links, None)
-    nz = z.shape[0]
-    first = [fns["first"](*_arguments(state, b)) for b in blocks]
-    second = [fns["second"](*_arguments(state, b)) for b in blocks]
-    jac_rows = []
-    H = ca.SX(nz, nz)
-    curv: dict[tuple[int, int], Any] = {}
-    weights: dict[int, tuple[Any, Any]] = {L: (ca.SX.zeros(3), ca.SX.zeros(3, 3)) for L in links}
-    for k, cap in enumerate(caps):
-        mine = [m for m, b in enumerate(blocks) if b.row == k]
-        _, W = _row_weights([first[m][0] for m in mine], cap)
-        jac_rows.append(_gradient(J, [blocks[m] for m in mine], [first[m] for m in mine], W, nz).T)
-        _, W2 = _row_weights([second[m][0] for m in mine], cap)
-        grad = _gradient(J, [blocks[m] for m in mine], [second[m] for m in mine], W2, nz)
-        H = H + lam[k] * SOFT_MIN_BETA * (grad @ grad.T)
-        for t, m in enumerate(mine):
-            b, (_, wa, wb, Caa, Cab, Cbb, Ga, Gb) = blocks[m], second[m]
-            c = lam[k] * W2[t]
-            for key, C in (((b.a, b.a), Caa), ((b.a, b.b), Cab), ((b.b, b.b), Cbb)):
-                curv[key] = curv.get(key, 0) + c * C
-            for L, w, G in ((b.a, wa, Ga), (b.b, wb, Gb)):
-                F0, G0 = weights[L]
-                weights[L] = (F0 + c * w[0:3], G0 + c * G)
-    for (La, Lb), M in curv.items():
-        part = J[La].T @ M @ J[Lb]
-        H = H + (part if La == Lb else part + part.T)
-    Hk = kinematic_hessian(weights, state, J, z)
-    if Hk is not None:
-        H = H + Hk
-    jac = ca.vertcat(*jac_rows) if jac_rows else ca.SX(0, nz)
-    return BlockDerivatives(z=z, jacobian=jac, lam=lam, hessian=H)
-
-
-def _gradient(J: dict[int, Any], blocks: list[Block], outs: list[Any], W: Any, nz: int) -> Any:
-    """∇_z row (nz,) = Σ_b W_b (J_aᵀ wa_b + J_bᵀ wb_b), the wrenches summed per link first."""
-    wrench: dict[int, Any] = {}
-    for t, (b, out) in enumerate(zip(blocks, outs, strict=True)):
-        wrench[b.a] = wrench.get(b.a, 0) + W[t] * out[1]
-        wrench[b.b] = wrench.get(b.b, 0) + W[t] * out[2]
-    grad = ca.SX(nz, 1)
-    for L, w in wrench.items():
-        grad = grad + J[L].T @ w
-    return grad
+    return values, build

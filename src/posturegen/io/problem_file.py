@@ -297,7 +297,7 @@ def _solver_options(value: Any) -> SolverOptions:
         v,
         "options.solver",
         [],
-        ["tol", "max_iter", "max_call_iter", "max_cpu_time", "print_level", "jit"],
+        ["tol", "max_iter", "max_call_iter", "max_cpu_time", "print_level", "jit", "method", "qp"],
     )
     jit = v.get("jit", False)
     if not isinstance(jit, bool):
@@ -316,6 +316,8 @@ def _solver_options(value: Any) -> SolverOptions:
             v.get("max_cpu_time", base.max_cpu_time), "options.solver.max_cpu_time", positive=True
         ),
         jit=jit,
+        method=None if v.get("method") is None else F.string(v["method"], "options.solver.method"),
+        qp=None if v.get("qp") is None else F.string(v["qp"], "options.solver.qp"),
         print_level=int(
             F.number(
                 v.get("print_level", base.print_level), "options.solver.print_level", minimum=0

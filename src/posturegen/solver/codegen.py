@@ -9,8 +9,9 @@ contraction into fused multiply-adds), so an IPOPT run gives the same iterates t
 A library is keyed by the structure's fingerprint (:mod:`posturegen.solver.fingerprint`: the
 package's sources, the robot's model, each term's structure and what it reads), else by the
 SHA-256 of the program's *content* (the serialized function (x, p) -> (f, g)), plus the CasADi
-version, the machine and the compiler flags. Any change of a term, a robot, a contact type or
-the active collision pairs gives a new key; the same structure in another process or a later
+version, the machine and the compiler flags. Any change of a term, a robot or a contact type
+gives a new key (the collision pairs held are parameters: an active set's change, or a capacity
+already compiled, keeps it); the same structure in another process or a later
 session finds its library in ``cache_dir()`` (``$POSTUREGEN_CACHE/solvers``, else
 ``~/.cache/posturegen/solvers``) and pays no compilation. Beside each library, its layout
 (``KEY.layout.npz``: where each block sits in x, p and g, the bounds) and, in the library, the
@@ -20,10 +21,15 @@ declaring its symbolic program.
 Modes (:attr:`posturegen.solver.problem.SolverOptions.codegen`, else ``$POSTUREGEN_CODEGEN``):
 
 - ``auto`` (default): a structure whose library is on disk is solved with it at once; else
-  with the virtual machine, and its library is compiled in a background thread once the
-  structure is used a second time in the process (a single solve never pays a compilation);
-  the next solve after the build switches to it;
-- ``sync``: the library is built before the first solve (waits for the compiler);
+  its library is built before its first solve (the call waits for the compiler, once per
+  structure and machine). Measured on Talos' near-body reaches never seen, a fresh process
+  with an empty cache, 2 cores: the first call took 16-24 s, every later one ran generated C
+  (median 59 ms); building in the background while the virtual machine solved left the
+  next 15 calls at 230-710 ms each (the compiler held both cores for longer than they took);
+- ``sync``: the same as ``auto`` (kept for problem files: ``options.solver.jit``);
+- ``background``: the virtual machine solves while the library compiles in a background
+  thread, started at the structure's first use; the next solve after the build switches to
+  it (a single solve never waits for a compiler);
 - ``off``: the virtual machine only. Without a C compiler every mode is ``off``.
 
 IPOPT's five functions are compiled at ``-Og`` (gcc 12, Talos' Hessian of the Lagrangian:
@@ -62,7 +68,7 @@ from ..errors import InputError
 from . import _lifeline
 
 CODEGEN_VERSION = 2  # 2: the outputs function in the library, the layout beside it
-MODES = ("auto", "sync", "off")
+MODES = ("auto", "sync", "background", "off")
 # the functions IPOPT calls at every iteration, and those nlpsol needs to exist
 HOT_FUNCTIONS = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l")
 COLD_FUNCTIONS = ("nlp", "nlp_grad", "outputs")
@@ -71,7 +77,7 @@ COLD_FLAGS = ("-O0",)
 # least recently used libraries beyond this are deleted (1-4 MB each; `posturegen bench --jit`
 # alone left 91 of them, 252 MB, against 256 MB, the bound before)
 MAX_CACHE_BYTES = 1 << 30
-AUTO_BUILD_AFTER_USES = 2  # mode auto: compile when a structure is solved this many times
+BACKGROUND_AFTER_USES = 1  # mode background: compile once a structure is solved this often
 COMPILE_TIMEOUT_S = 600.0  # a library's build (compilation and link) that takes longer fails
 
 

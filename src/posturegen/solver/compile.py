@@ -8,6 +8,7 @@ numeric parameter values, initial guess and bounds of an instance are filled by
 
 from __future__ import annotations
 
+import collections
 import json
 import threading
 import time
@@ -87,14 +88,14 @@ class CompiledNLP(_Layout):
 
     def refresh(self) -> None:
         """Count a use of the solver; switch to the compiled library when it is in the cache;
-        in mode ``auto``, start its background build at the second use."""
+        in mode ``background``, start its background build (at the first use)."""
         self.uses += 1
         if self.library or self.library_key is None:
             return
         solver = codegen.load(self.library_key, self.ipopt_options)
         if solver is not None:
             self.solver, self.library = solver, True
-        elif self.codegen_mode == "auto" and self.uses >= codegen.AUTO_BUILD_AFTER_USES:
+        elif self.codegen_mode == "background" and self.uses >= codegen.BACKGROUND_AFTER_USES:
             codegen.build_in_background(self.library_key, self.sources())
 
     def sources(self) -> codegen.Sources:
@@ -156,6 +157,13 @@ _CACHE: BoundedCache[CompiledNLP] = BoundedCache("compiled solvers", CACHE_SIZE)
 _PROGRAMS: BoundedCache[_Program] = BoundedCache("symbolic programs", CACHE_SIZE)
 _LAYOUTS: BoundedCache[_Layout] = BoundedCache("layouts from the disk cache", CACHE_SIZE)
 _FINGERPRINTS: BoundedCache[str] = BoundedCache("structure fingerprints", 4 * CACHE_SIZE)
+
+
+# how many program structures (robot, terms' keys, elastic relaxation) this process has made
+# ready to solve, by how: "declared" (its symbolic program built) or "loaded" (its layout read
+# from beside its library on disk, found by its fingerprint); a solver-option variant of a
+# structure already made is neither
+MADE: collections.Counter[str] = collections.Counter()
 
 
 def is_compiled(program: Compilable) -> bool:
@@ -243,7 +251,7 @@ def _from_expressions(
         {"x": prog.x, "p": prog.p, "f": prog.f, "g": prog.g},
         {**opts, **prog.derivative_functions},
     )
-    if mode == "sync" and lib_key is not None:
+    if mode in ("auto", "sync") and lib_key is not None:
         what = codegen.Sources(solver, prog.function, prog.outputs, _layout_arrays(prog))
         codegen.build(lib_key, what)
         built = codegen.load(lib_key, opts)
@@ -286,6 +294,7 @@ def _disk_layout(program: Compilable, lib_key: str) -> _Layout | None:
         layout = _read_layout(lib_key)
         if layout is not None:
             _LAYOUTS.put(k, layout)
+            MADE["loaded"] += k not in _PROGRAMS  # a structure declared here is not new
     return layout
 
 
@@ -330,6 +339,7 @@ _EARLY: BoundedCache[BuildContext] = BoundedCache("programs without the late ter
 
 def _declare(program: Compilable) -> _Program:
     """Every term declares its pieces; the program's vectors, functions and layout."""
+    MADE["declared"] += 1
     terms = list(enumerate(program.terms()))
 
     def declare(ctx: BuildContext, which: list[tuple[int, Term]]) -> BuildContext:

@@ -24,12 +24,11 @@ from ..collision.active_set import box_label
 from ..model.kinematics import scratch_data
 from ..terms.elastic import Elastic, slack_values
 from .problem import Program
+from .runs import _IPOPT_OK, run_nlp
 from .solve import (
-    _IPOPT_OK,
     Result,
     _outputs,
     _result,
-    _run_ipopt,
     _solve_avoiding,
     configuration_from_x,
     solve,
@@ -173,7 +172,7 @@ def restart_from(problem: Any, relaxed: Relaxed) -> Result:
     x0, layout = relaxed.x, relaxed.x_index
     program = Program.of(problem)
     if problem.collision_options is None:
-        result = _result(program, [_run_ipopt(program, x0, layout=layout)])
+        result = _result(program, run_nlp(program, x0, layout=layout))
     else:
         result = _solve_avoiding(program, x0, [], layout)[0]
     note = "solved again from the relaxed program's posture (the first start did not converge)"
@@ -222,7 +221,7 @@ def _elastic_run(problem: Any, elastic: Elastic, opts: Any, start: Relaxed | Non
     )
     x0, layout = (None, None) if start is None else (start.x, start.x_index)
     if opts is None:
-        run = _run_ipopt(Program.of(relaxed), x0, layout=layout)
+        run = run_nlp(Program.of(relaxed), x0, layout=layout)[-1]
     else:
         run = _solve_avoiding(Program.of(relaxed), x0, [], layout)[1][-1]
     q = configuration_from_x(relaxed, run.compiled, run.x)

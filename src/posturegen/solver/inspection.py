@@ -5,9 +5,11 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..collision.active_set import SELF_PER_LINK, ActiveSet, box_label
-from ..collision.rows import ENV_SLOT_BLOCK, CollisionTerm
-from .problem import Program
+from ..collision.active_set import ENV_PER_LINK, SELF_PER_LINK, ActiveSet, box_label
+from ..collision.rows import CollisionTerm
+from ..collision.slots import SELF_SLOT_BLOCK
+from .problem import Program, SolverOptions
+from .qp import registry as qp_registry
 
 
 def initial_collision_term(problem: Any) -> tuple[ActiveSet, CollisionTerm] | None:
@@ -29,10 +31,25 @@ def describe(problem: Any) -> str:
     posture, and the collision avoidance's candidates."""
     initial = initial_collision_term(problem)
     if initial is None:
-        return problem.summary()
+        return "\n".join([problem.summary(), solver_line(problem.solver_options)])
     check, term = initial
     with_rows = Program.of(problem, collision_term=term)
-    return "\n".join([with_rows.summary(), *_collision_lines(check, term)])
+    return "\n".join(
+        [with_rows.summary(), solver_line(problem.solver_options), *_collision_lines(check, term)]
+    )
+
+
+def solver_line(options: SolverOptions) -> str:
+    """Which solver a solve of the problem runs (SolverOptions.method)."""
+    method = options.solver_method()
+    qp = options.qp or (qp_registry.available() or ["none"])[0]
+    sqp = f"posturegen's SQP (QP: {qp})"
+    what = {
+        "auto": f"{sqp}, then IPOPT from the same start when it fails",
+        "sqp": sqp,
+        "ipopt": "IPOPT",
+    }[method]
+    return f"solver: {method}: {what}"
 
 
 def _collision_lines(check: ActiveSet, term: CollisionTerm) -> list[str]:
@@ -41,26 +58,30 @@ def _collision_lines(check: ActiveSet, term: CollisionTerm) -> list[str]:
     cm = 100 * opts.margin
     lines = [f"collision avoidance (margin {cm:.3g} cm), rows at the initial posture:"]
     if opts.self_collision:
+        held = sum(1 for _, members in term.self_groups() if members)
         lines.append(
-            f"  collision.self: {len(term.self_groups())} rows (one per pair of limbs) over "
-            f"{len(term.self_pairs)} sphere pairs of {len(check.links)} candidate pairs of "
-            f"links, those closer than {100 * opts.activation:.3g} cm beyond their clearance "
-            f"(the {SELF_PER_LINK} closest of each pair of links)"
+            f"  collision.self: {len(term.self_groups())} rows (one per pair of limbs, {held} "
+            f"holding pairs) over {len(term.self_pairs)} sphere pairs of {len(check.links)} "
+            f"candidate pairs of links, those closer than {100 * opts.activation:.3g} cm beyond "
+            f"their clearance (the {SELF_PER_LINK} closest of each pair of links), in "
+            f"{term.fill.blocks} of the program's {term.capacity.self_blocks} blocks of "
+            f"{SELF_SLOT_BLOCK} slots"
         )
     else:
         lines.append("  collision.self: none (self_collision: false)")
     if check.boxes:
         boxes = ", ".join(box_label(b) for b in check.boxes)
         lines.append(
-            f"  collision.env: {len(term.env_rows())} rows (one per sphere slot and box, "
-            f"{ENV_SLOT_BLOCK} slots per link and box) holding {len(term.env_pairs)} of "
-            f"{check.n_env_candidates} candidate sphere-box pairs, those closer than "
-            f"{cm + 100 * opts.environment_activation:.3g} cm; boxes: {boxes}"
+            f"  collision.env: {len(term.env_rows())} rows (one per sphere-box slot) holding "
+            f"{len(term.env_pairs)} of {check.n_env_candidates} candidate sphere-box pairs, "
+            f"those closer than {cm + 100 * opts.environment_activation:.3g} cm (the "
+            f"{ENV_PER_LINK} closest of each link and box); boxes: {boxes}"
         )
     else:
         lines.append("  collision.env: none (no obstacle or support surface to avoid)")
     lines.append(
-        "  rows come and go with the active set: after each IPOPT run every candidate pair is "
+        "  the rows' pairs are parameters of one program (its slots double when an active set "
+        "needs more): after each IPOPT run every candidate pair is "
         "checked, those closer than the margin enter and IPOPT runs again (up to "
         f"{opts.max_rounds} rounds); if a mesh check then fails, the margin grows by 1 cm "
         f"(up to {opts.tighten} times)"

@@ -11,6 +11,7 @@ overrides, a frozen value of the solve's own. The compiled program of a structur
 from __future__ import annotations
 
 import dataclasses
+import os
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -18,6 +19,7 @@ import numpy as np
 
 from .._cache import Ref
 from ..collision.boxes import CollisionOptions
+from ..errors import InputError
 from ..model.robot import Robot
 from ..model.scene import Scene
 from ..terms.configuration import ConfigurationTerm
@@ -27,18 +29,22 @@ from ..terms.equilibrium import StaticEquilibrium
 from ..terms.nlp import Term
 from . import codegen
 from .compile import CompiledNLP, compile_program, constraint_counts, numeric, summary
+from .qp import registry as qp_registry
 
 # MUMPS' scalings off (IPOPT's defaults: 77 and 7, automatic). Measured 2026-12-03 with the
 # same iterations on every planner family (talos-reach-balance-free 12 median, -collision 13,
 # talos-stances-collision 3188 against 3189 on 150 problems) and about 17 % fewer
 # instructions in IPOPT (callgrind, free family); the scripted climbs all verify, in 10,912
 # iterations instead of 15,417 (ATLAS stairs 7929 -> 3682, HRP-2 vertical ladder 2089 -> 2530)
+# the solvers a problem may ask for (SolverOptions.method)
+METHODS = ("auto", "sqp", "ipopt")
+
 MUMPS_SCALING = {"ipopt.mumps_scaling": 0, "ipopt.mumps_permuting_scaling": 0}
 
 
 @dataclass(frozen=True)
 class SolverOptions:
-    """IPOPT settings."""
+    """The solver's settings: which solver (``method``), and IPOPT's and the SQP's limits."""
 
     tol: float = 1e-8
     constr_viol_tol: float = 1e-9
@@ -46,10 +52,10 @@ class SolverOptions:
     max_cpu_time: float = 30.0
     print_level: int = 0
     # Generated C for the program's functions (posturegen.solver.codegen): "auto" compiles a
-    # structure
-    # in the background once it is reused and loads it from the disk cache in later sessions,
-    # "sync" compiles before the first solve, "off" keeps CasADi's virtual machine; None:
-    # $POSTUREGEN_CODEGEN, else "auto". Without a C compiler: "off".
+    # structure before its first solve and loads it from the disk cache in later sessions
+    # ("sync": the same), "background" compiles while the virtual machine solves, "off" keeps
+    # CasADi's virtual machine; None: $POSTUREGEN_CODEGEN, else "auto". Without a C
+    # compiler: "off".
     codegen: str | None = None
     # the same as codegen="sync" (compile before the first solve; kept for problem files)
     jit: bool = False
@@ -71,6 +77,40 @@ class SolverOptions:
     # held. None: unbounded. Not part of the structure (two problems that differ only by it
     # share their compiled program; a run cut short builds a variant with a smaller max_iter).
     max_call_iter: int | None = field(default=None, compare=False)
+    # which solver runs (posturegen.solver.runs): "sqp" (the SQP core, posturegen.solver.sqp),
+    # "ipopt", or "auto": the SQP, then IPOPT from the same start when the SQP fails. None:
+    # $POSTUREGEN_SOLVER, else "auto". Not part of the structure: both run on the same
+    # compiled functions.
+    method: str | None = field(default=None, compare=False)
+    # the SQP's QP solver (posturegen.solver.qp.registry; None: daqp, else proxsuite)
+    qp: str | None = field(default=None, compare=False)
+
+    def __post_init__(self) -> None:
+        if self.method is not None and self.method not in METHODS:
+            raise InputError(
+                "options.solver.method",
+                f"unknown solver {self.method!r}",
+                f"use one of: {', '.join(METHODS)}",
+            )
+        if self.qp is not None and self.qp not in qp_registry.names():
+            raise InputError(
+                "options.solver.qp",
+                f"unknown QP solver {self.qp!r}",
+                f"use one of: {', '.join(qp_registry.names())}",
+            )
+
+    def solver_method(self) -> str:
+        """The effective solver: ``method``, else $POSTUREGEN_SOLVER, else "auto"."""
+        if self.method is not None:
+            return self.method
+        env = os.environ.get("POSTUREGEN_SOLVER", "").strip()
+        if not env:
+            return "auto"
+        if env not in METHODS:
+            raise InputError(
+                "$POSTUREGEN_SOLVER", f"unknown solver {env!r}", f"use one of: {', '.join(METHODS)}"
+            )
+        return env
 
     def ipopt(self) -> dict[str, Any]:
         """The options dict passed to casadi.nlpsol."""
@@ -90,6 +130,9 @@ class SolverOptions:
             **MUMPS_SCALING,
             "print_time": False,
             "error_on_fail": False,
+            # the parameters' multipliers are never read (and the collision slots' link and row
+            # indices, parameters that pick, have none)
+            "calc_lam_p": False,
         }
         if self.mu_init is not None:
             opts["ipopt.mu_init"] = self.mu_init

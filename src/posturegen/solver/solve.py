@@ -7,8 +7,6 @@
 from __future__ import annotations
 
 import dataclasses
-import time
-from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -21,13 +19,23 @@ from ..collision.active_set import ActiveSet, placed_blocked
 from ..collision.boxes import TIGHTEN_STEP
 from ..collision.rows import CollisionTerm
 from ..collision.separation import separated_start
+from ..collision.slots import Capacity
 from ..io.posture_file import add_solve_fields, posture_dict, write_posture
 from ..verify import VerifyReport, verify_posture
-from .compile import CompiledNLP, initial_guess, is_compiled, layout_of
+from .compile import initial_guess, layout_of
 from .problem import Problem, Program, SolverOptions
+from .runs import (
+    _IPOPT_OK,
+    BUDGET,
+    Budget,
+    Run,
+    block_multipliers,
+    budget_left,
+    map_collision_multipliers,
+    per_block,
+    run_nlp,
+)
 from .starts import START_MU_INIT, START_WARM_MU_INIT, Solved, carried, start_vector
-
-_IPOPT_OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
 
 
 @dataclass(frozen=True)
@@ -41,13 +49,13 @@ class ContactForce:
 
 @dataclass(frozen=True)
 class Result:
-    """A solved posture. ``success`` means IPOPT converged and the re-check passed."""
+    """A solved posture. ``success`` means the solver converged and the re-check passed."""
 
     success: bool
-    status: str  # IPOPT's return status
+    status: str  # the solver's return status (IPOPT's names, the SQP's too)
     message: str  # why it failed, or "verified"
-    iterations: int
-    solve_time_s: float  # IPOPT's own wall time [s]
+    iterations: int  # of every run of the call, SQP and IPOPT
+    solve_time_s: float  # the solvers' own wall time [s]
     build_time_s: float  # time to build the solver (0 when it came from the cache) [s]
     q: np.ndarray  # (nq,) Pinocchio order: base xyz, quaternion xyzw, joints
     torques: np.ndarray  # (nj,) actuated joints, velocity order [N·m]
@@ -69,6 +77,10 @@ class Result:
     # and its multipliers: of the variables' bounds (n_x,), of each constraint block
     lam_x: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
     lam_g: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    # the solver of the last run ("sqp" or "ipopt", SolverOptions.method) and the iterations
+    # of each solver over the call's runs
+    method: str = "ipopt"
+    iterations_by_method: dict[str, int] = dataclasses.field(default_factory=dict)
 
     @property
     def max_violation(self) -> float:
@@ -81,156 +93,11 @@ class Result:
         return write_posture(path, self.posture)
 
 
-@dataclass
-class _Budget:
-    """The IPOPT iterations one call of :func:`solve` may spend (SolverOptions.max_call_iter)
-    and has spent: each run is charged; once spent, no run starts."""
-
-    limit: int | None
-    spent: int = 0
-
-    def left(self) -> bool:
-        return self.limit is None or self.spent < self.limit
-
-    def run_cap(self, max_iter: int) -> int:
-        """The next run's iteration limit: ``max_iter``, or what is left of the budget rounded
-        up to a multiple of BUDGET_STEP when less (a few solver variants per structure, not
-        one per count), so that a call spends at most its budget + BUDGET_STEP - 1."""
-        if self.limit is None:
-            return max_iter
-        left = max(self.limit - self.spent, 1)
-        return min(max_iter, -(-left // BUDGET_STEP) * BUDGET_STEP)
-
-
-# [iterations] a run's limit under a call's budget: what is left, rounded up to this
-BUDGET_STEP = 25
-
-# the budget of the solve running in this thread (or task); outside a solve, unbounded
-_BUDGET: ContextVar[_Budget | None] = ContextVar("posturegen_call_budget", default=None)
-
-
-def _budget_left() -> bool:
-    """True while the running call may start another IPOPT run."""
-    budget = _BUDGET.get()
-    return budget is None or budget.left()
-
-
-@dataclass
-class _Run:
-    """One IPOPT run: its solution and what it cost."""
-
-    program: Program  # what the run solved: the problem with this run's overrides
-    compiled: CompiledNLP
-    x: np.ndarray
-    p: np.ndarray
-    f: float
-    status: str
-    iterations: int
-    solve_time_s: float
-    build_time_s: float
-    lam_x: np.ndarray | None = None
-    lam_g: np.ndarray | None = None
-
-
-def _run_ipopt(
-    program: Program,
-    x0: np.ndarray | None,
-    lam_x0: np.ndarray | None = None,
-    lam_g0: dict[str, np.ndarray] | None = None,
-    joints0: np.ndarray | None = None,
-    layout: dict[str, slice] | None = None,
-) -> _Run:
-    """One IPOPT run; with ``lam_g0`` (multipliers per constraint block) a warm start; without
-    ``x0``, the problem's initial guess with ``joints0`` (nj,) for the joints when given.
-    ``layout``: the variable blocks of ``x0`` and ``lam_x0`` when they may differ from this
-    program's (an elastic program's collision slacks grow with the active set)."""
-    budget = _BUDGET.get()
-    options = program.solver_options
-    cap = options.max_iter if budget is None else budget.run_cap(options.max_iter)
-    if cap < options.max_iter:  # the call's budget ends within this run
-        program = program.but(solver_options=dataclasses.replace(options, max_iter=cap))
-    built_before = is_compiled(program)
-    compiled = program.compile()
-    with compiled.lock:
-        compiled.refresh()  # generated C once it is built (posturegen.solver.codegen)
-    x_init, p, lbg, ubg = program.numeric(compiled)
-    if x0 is not None and layout is not None and layout != compiled.x_index:
-        x0 = carried(x0, layout, compiled.x_index, x_init)
-        if lam_x0 is not None:
-            lam_x0 = carried(lam_x0, layout, compiled.x_index, np.zeros_like(x_init))
-    if x0 is not None and x0.shape == x_init.shape:
-        x_init = x0
-    elif joints0 is not None:
-        x_init[compiled.x_index["joints"]] = joints0
-    warm: dict[str, Any] = {}
-    if lam_g0 is not None and lam_x0 is not None:
-        lam = np.zeros(compiled.n_g)
-        for name, sl in compiled.g_index.items():
-            if name in lam_g0 and lam_g0[name].size == sl.stop - sl.start:
-                lam[sl] = lam_g0[name]
-        warm = {"lam_x0": lam_x0, "lam_g0": lam}
-    with compiled.lock:  # a solver's stats() are those of its last call: one thread at a time
-        t0 = time.perf_counter()
-        sol = compiled.solver(
-            x0=x_init, p=p, lbx=compiled.lbx, ubx=compiled.ubx, lbg=lbg, ubg=ubg, **warm
-        )
-        wall = time.perf_counter() - t0
-        stats = compiled.solver.stats()
-    run = _Run(
-        program=program,
-        compiled=compiled,
-        x=np.array(sol["x"]).ravel(),
-        p=p,
-        f=float(sol["f"]),
-        status=str(stats.get("return_status", "unknown")),
-        iterations=int(stats.get("iter_count", -1)),
-        solve_time_s=float(stats.get("t_wall_total", wall)),
-        build_time_s=0.0 if built_before else compiled.build_time_s,
-        lam_x=np.array(sol["lam_x"]).ravel(),
-        lam_g=np.array(sol["lam_g"]).ravel(),
-    )
-    if budget is not None:
-        budget.spent += max(run.iterations, 0)
-    return run
-
-
-def _per_block(run: _Run) -> dict[str, np.ndarray]:
-    """The run's constraint multipliers per block (none without them)."""
-    if run.lam_g is None:
-        return {}
-    return {name: run.lam_g[sl] for name, sl in run.compiled.g_index.items()}
-
-
-def _block_multipliers(run: _Run, term: Any) -> dict[str, np.ndarray]:
-    """The last run's constraint multipliers per block; collision rows keyed by their pair so
-    that they survive the growth of the active set (see _map_collision_multipliers)."""
-    out: dict[str, Any] = _per_block(run)
-    if term is not None:
-        if "collision.self" in out:
-            keys = [k for k, _ in term.self_groups()]
-            out["collision.self"] = dict(zip(keys, out["collision.self"], strict=True))
-        if "collision.env" in out:
-            rows = zip(term.env_rows(), out["collision.env"], strict=True)
-            out["collision.env"] = {pair: lam for pair, lam in rows if pair is not None}
-    return out
-
-
-def _map_collision_multipliers(lam: dict[str, Any], term: Any) -> dict[str, np.ndarray]:
-    """Multipliers for the new active set: old pairs keep theirs, new pairs start at 0."""
-    out = {k: v for k, v in lam.items() if isinstance(v, np.ndarray)}
-    groups = [k for k, _ in term.self_groups()]
-    for block, pairs in (("collision.self", groups), ("collision.env", term.env_rows())):
-        old = lam.get(block)
-        if pairs:
-            old = old if isinstance(old, dict) else {}
-            out[block] = np.array([0.0 if p is None else old.get(p, 0.0) for p in pairs])
-    return out
-
-
-# Sphere pairs that entered the program of earlier problems of the same structure: the next
-# problem of that structure starts with them, so that its program is usually the same one
-# (a planner's next query pays no rebuild, and its first run already has the right rows).
-_LEARNED: BoundedCache[tuple[frozenset[tuple[int, int]], frozenset[tuple[int, int]]]] = (
+# Sphere pairs that entered the program of earlier problems of the same structure, and the
+# capacity of its collision rows: the next problem of that structure starts with them, so that
+# its first run already has the rows it is likely to need, in the program already built (the
+# capacity only grows: a planner's next query never meets another program).
+_LEARNED: BoundedCache[tuple[frozenset[tuple[int, int]], frozenset[tuple[int, int]], Capacity]] = (
     BoundedCache("learned active sets", 64)
 )
 # Learned pairs start the next problem's active set: up to 160 of them. Up to 1000 (Talos'
@@ -238,12 +105,6 @@ _LEARNED: BoundedCache[tuple[frozenset[tuple[int, int]], frozenset[tuple[int, in
 # 'left foot on rung 2' (infeasible): rows learned from the earlier stages and from the
 # solve's own continuations held it where it could not move.
 _LEARNED_MAX_PAIRS = 160
-# A solve's rows fill the slots of a layout (rows.Layout: 16 per joint pair, 4 per link and
-# box) that grows over its rounds: two active sets of the same joint pairs share a compiled
-# program. Layouts are not carried from one problem to the next: united over a structure's
-# solves, their constant rows of free slots changed IPOPT's path (its KKT systems grew), and
-# HRP-2's vertical ladder ('left foot on rung 2') and Talos' stairs ('right foot on step 3')
-# failed where they verify without.
 # collision rows start close to active: a smaller initial barrier parameter took 32 instead
 # of 44 median iterations on talos-near-body-collision (n = 20, mu_init 1e-2 against IPOPT's
 # 0.1); with the separated start (collision.separated_start) 1e-3 took 22.5 and 21.0 (two
@@ -289,11 +150,11 @@ def solve(problem: Problem, x0: np.ndarray | None = None, start: Solved | None =
     nearest solution): without collision avoidance its multipliers too (IPOPT's warm start,
     SolverOptions.warm_start), else its variables, the active-set loop's own barrier
     parameter then (COLLISION_MU_INIT). The continuations start from its variables."""
-    token = _BUDGET.set(_Budget(problem.solver_options.max_call_iter))
+    token = BUDGET.set(Budget(problem.solver_options.max_call_iter))
     try:
         return _solve(problem, x0, start)
     finally:
-        _BUDGET.reset(token)
+        BUDGET.reset(token)
 
 
 def _solve(problem: Problem, x0: np.ndarray | None, start: Solved | None) -> Result:
@@ -307,7 +168,7 @@ def _solve(problem: Problem, x0: np.ndarray | None, start: Solved | None) -> Res
     effort = problem.robot.effort_limit
     if result.success or result.status in _IPOPT_OK or not np.any(np.isfinite(effort)):
         return result
-    if not _budget_left():
+    if not budget_left():
         return result
     relaxed = program.but(torque_limit_scale=program.torque_limit_scale * TORQUE_CONTINUATION)
     _, relaxed_runs = _solve_continued(relaxed, x_start, runs)
@@ -317,7 +178,7 @@ def _solve(problem: Problem, x0: np.ndarray | None, start: Solved | None) -> Res
     return retry if retry.success else result
 
 
-def _outputs(run: _Run) -> dict[str, np.ndarray]:
+def _outputs(run: Run) -> dict[str, np.ndarray]:
     """The program's outputs at a run's solution, flattened (column-major)."""
     out = run.compiled.outputs(x=run.x, p=run.p)
     return {k: np.array(v).ravel(order="F") for k, v in out.items()}
@@ -326,9 +187,9 @@ def _outputs(run: _Run) -> dict[str, np.ndarray]:
 def _solve_continued(
     program: Program,
     x_start: np.ndarray | None,
-    prior: list[_Run],
+    prior: list[Run],
     duals: tuple[np.ndarray, dict[str, np.ndarray]] | None = None,
-) -> tuple[Result, list[_Run]]:
+) -> tuple[Result, list[Run]]:
     """One solve from ``x_start`` (the active-set loop with collision avoidance, and the
     collision continuation when it fails); ``prior`` runs count in the Result. Returns the
     Result and every run so far. ``duals``: (lam_x, lam_g per block) of a warm start
@@ -336,35 +197,54 @@ def _solve_continued(
     program = program.but(collision_term=None)
     if program.collision_options is None:
         lam_x0, lam_g0 = duals if duals is not None else (None, None)
-        runs = [*prior, _run_ipopt(program, x_start, lam_x0, lam_g0)]
+        runs = [*prior, *run_nlp(program, x_start, lam_x0, lam_g0)]
         return _result(program, runs), runs
     blocked = placed_blocked(program)
     if blocked is not None:  # no posture passes: one run without collision rows, and why
-        runs = [*prior, _run_ipopt(program.but(collision_options=None), x_start)]
+        runs = [*prior, *run_nlp(_without_rows(program), x_start)]
         result = _result(program, runs)
         return (result if result.success else _explained(result, blocked)), runs
     result, runs = _solve_avoiding(program, x_start, prior)
     if result.success:
         return result, runs
-    # Continuation: without collision rows the program is smaller and smoother, and it often
+    # Continuation: without collision rows (the same program, every pair let go) it often
     # converges where the full one stops infeasible (a far warm start, many rows becoming
     # active at once); its solution then starts the full program. On the inclined ladder
     # (HRP-2, left foot to step 2): 355 iterations, infeasible; 22 without collisions, then
     # 264 from there, verified.
-    if not _budget_left():
+    if not budget_left():
         return result, runs
-    relaxed = _run_ipopt(program.but(collision_options=None), x_start)
-    if relaxed.status not in _IPOPT_OK:
-        return result, [*runs, relaxed]
-    return _solve_avoiding(program, relaxed.x, [*runs, relaxed])
+    relaxed = run_nlp(_without_rows(program), x_start)
+    if not relaxed[-1].ok:
+        return result, [*runs, *relaxed]
+    return _solve_avoiding(program, relaxed[-1].x, [*runs, *relaxed])
+
+
+def _learned_key(program: Program, active: ActiveSet) -> tuple[Any, ...]:
+    """What the pairs and the capacity learned from earlier problems are kept under."""
+    opts = program.collision_options
+    return (program.key(), len(active.boxes), opts.self_collision, opts.exclude)
+
+
+def _without_rows(program: Program) -> Program:
+    """The program with its collision rows but no pair held (every row free: unbounded, a
+    constant), in the capacity its problems have learned: the same structure as its collision
+    runs, so that a run without collision avoidance compiles nothing more."""
+    active = ActiveSet.of(program)
+    _, _, capacity = _LEARNED.get(
+        _learned_key(program.but(collision_term=None), active),
+        (frozenset(), frozenset(), Capacity()),
+    )
+    active.capacity = capacity
+    return program.but(collision_term=active.term(program.collision_options.margin))
 
 
 def _solve_avoiding(
     program: Program,
     x0: np.ndarray | None,
-    prior: list[_Run],
+    prior: list[Run],
     layout: dict[str, slice] | None = None,
-) -> tuple[Result, list[_Run]]:
+) -> tuple[Result, list[Run]]:
     """The active-set loop of :func:`solve` from ``x0`` (laid out as ``layout``, default
     this program's); ``prior`` runs count in the Result's iterations and times. Returns the
     Result and every run so far."""
@@ -381,22 +261,27 @@ def _solve_avoiding(
             program.q_init,
             [c.patch.joint_id for c in program.contacts],
         )
-    base_key = (program.key(), len(active.boxes), opts.self_collision, opts.exclude)
-    learned_self, learned_env = _LEARNED.get(base_key, (frozenset(), frozenset()))
+    base_key = _learned_key(program, active)
+    learned_self, learned_env, capacity = _LEARNED.get(
+        base_key, (frozenset(), frozenset(), Capacity())
+    )
     active.self_pairs, active.env_pairs = set(learned_self), set(learned_env)
+    active.capacity = capacity
     run_options = _collision_solver_options(program.solver_options)
     loop = _Loop(program.but(solver_options=run_options), active, run_options, x0, joints0, layout)
     result: Result | None = None
     for _attempt in range(opts.tighten + 1):
         loop.rounds(opts.max_rounds)
+        held = (learned_self, learned_env)  # too many pairs: the earlier ones kept
         if len(active.self_pairs) + len(active.env_pairs) <= _LEARNED_MAX_PAIRS:
-            _LEARNED.put(base_key, (frozenset(active.self_pairs), frozenset(active.env_pairs)))
+            held = (frozenset(active.self_pairs), frozenset(active.env_pairs))
+        _LEARNED.put(base_key, (*held, active.capacity))
         result = _result(program, [*prior, *loop.runs], loop.margin)
         if result.success or loop.runs[-1].status not in _IPOPT_OK:
             return result, [*prior, *loop.runs]
         if not any(c.name.startswith("collision") for c in result.verification.failures):
             return result, [*prior, *loop.runs]
-        if not _budget_left():
+        if not budget_left():
             return result, [*prior, *loop.runs]
         loop.margin += TIGHTEN_STEP  # the proxies passed but a mesh did not: tighten, retry
     return result, [*prior, *loop.runs]  # type: ignore[return-value]
@@ -425,7 +310,7 @@ class _Loop:
     x_warm: np.ndarray | None
     joints0: np.ndarray | None
     layout: dict[str, slice] | None = None  # the blocks of x_warm when not this program's
-    runs: list[_Run] = dataclasses.field(default_factory=list)
+    runs: list[Run] = dataclasses.field(default_factory=list)
     lam: dict[str, Any] | None = None
     margin: float = 0.0
 
@@ -442,7 +327,7 @@ class _Loop:
             scan = active.scan(self.q_check, self.margin, near=not self.runs)
             if self.runs and not (scan.violated_self or scan.violated_env):
                 return  # no candidate outside the active set is violated
-            if self.runs and not _budget_left():
+            if self.runs and not budget_left():
                 return  # the call's budget is spent: the re-check says what is violated
             active.grow(scan)
             term = active.term(self.margin)
@@ -450,39 +335,37 @@ class _Loop:
             if run.status not in _IPOPT_OK:
                 return
             self.x_warm = run.x
-            self.lam = _block_multipliers(run, term)
+            self.lam = block_multipliers(run, term)
             self.q_check = configuration_from_x(run.program, run.compiled, run.x)
 
-    def _run(self, term: CollisionTerm) -> _Run:
+    def _run(self, term: CollisionTerm) -> Run:
         """IPOPT on the program with ``term``'s rows: from the first start, or warm (primal
         and dual) from the last run; a warm run that fails is followed by a cold one from the
         same posture with IPOPT's default barrier parameter (RETRY_MU_INIT). Both count."""
         if self.lam is None:
             program = self.program.but(collision_term=term, solver_options=self.cold_run)
-            run = _run_ipopt(program, self.x_warm, joints0=self.joints0, layout=self.layout)
-            self.runs.append(run)
-            return run
+            self.runs += run_nlp(program, self.x_warm, joints0=self.joints0, layout=self.layout)
+            return self.runs[-1]
         warm = dataclasses.replace(self.cold_run, warm_start=True)
         program = self.program.but(collision_term=term, solver_options=warm)
-        lam = _map_collision_multipliers(self.lam, term)
+        lam = map_collision_multipliers(self.lam, term)
         layout = self.runs[-1].compiled.x_index
-        run = _run_ipopt(program, self.x_warm, self.runs[-1].lam_x, lam, layout=layout)
-        self.runs.append(run)
-        if run.status in _IPOPT_OK or not _budget_left():
-            return run
+        self.runs += run_nlp(program, self.x_warm, self.runs[-1].lam_x, lam, layout=layout)
+        if self.runs[-1].ok or not budget_left():
+            return self.runs[-1]
         cold = dataclasses.replace(self.cold_run, mu_init=RETRY_MU_INIT)
-        run = _run_ipopt(program.but(solver_options=cold), self.x_warm, layout=layout)
-        self.runs.append(run)
-        return run
+        self.runs += run_nlp(program.but(solver_options=cold), self.x_warm, layout=layout)
+        return self.runs[-1]
 
 
-def _message(status: str, report: VerifyReport) -> str:
+def _message(status: str, report: VerifyReport, method: str = "ipopt") -> str:
     """Why a solve failed, or "verified"."""
+    name = {"ipopt": "IPOPT", "sqp": "the SQP"}.get(method, method)
     if status not in _IPOPT_OK:
-        return f"IPOPT did not converge ({status})"
+        return f"{name} did not converge ({status})"
     if report.ok:
         return "verified"
-    return "IPOPT converged but the re-check failed: " + "; ".join(
+    return f"{name} converged but the re-check failed: " + "; ".join(
         f"{c.name} {c.value:.3g} > {c.tolerance:.1g}" + (f" ({c.detail})" if c.detail else "")
         for c in report.failures
     )
@@ -517,7 +400,7 @@ def _started(
     return program.but(solver_options=options), x, None
 
 
-def _result(program: Program, runs: list[_Run], margin: float | None = None) -> Result:
+def _result(program: Program, runs: list[Run], margin: float | None = None) -> Result:
     """The Result of the last run (times and iterations summed over every run)."""
     run = runs[-1]
     outputs = _outputs(run)
@@ -528,11 +411,11 @@ def _result(program: Program, runs: list[_Run], margin: float | None = None) -> 
     report = verify_posture(posture, program.robot.model, geometry)
     status = run.status
     success = status in _IPOPT_OK and report.ok
-    message = _message(status, report)
-    budget = _BUDGET.get()
+    message = _message(status, report, run.method)
+    budget = BUDGET.get()
     if not success and budget is not None and not budget.left():
         message = (
-            f"the call's {budget.limit} IPOPT iterations (options.solver.max_call_iter) were "
+            f"the call's {budget.limit} iterations (options.solver.max_call_iter) were "
             f"spent: {message}"
         )
     iterations = sum(r.iterations for r in runs)
@@ -563,7 +446,11 @@ def _result(program: Program, runs: list[_Run], margin: float | None = None) -> 
         x=run.x,
         x_blocks=dict(run.compiled.x_index),
         lam_x=np.zeros(0) if run.lam_x is None else run.lam_x,
-        lam_g=_per_block(run),
+        lam_g=per_block(run),
+        method=run.method,
+        iterations_by_method={
+            m: sum(r.iterations for r in runs if r.method == m) for m in {r.method for r in runs}
+        },
     )
 
 

@@ -1,0 +1,382 @@
+"""An SQP for posture programs: Fletcher's Sℓ1QP (a trust region in scaled variables, the
+ℓ1 merit f + ν‖viol(g)‖₁, elastic QPs where the linearization is inconsistent, a
+second-order correction of a rejected step), on a dense QP backend warm-started from the
+previous working set.
+
+Each iteration: B = ∇²L made positive definite (:mod:`.hessian`); the QP
+
+    min ½ dᵀBd + ∇fᵀd  s.t.  lbg <= g + J d <= ubg,  lbx <= x + d <= ubx,  |d_i| <= Δ s_i
+
+(its elastic form when it has no solution); the step is taken when the merit's actual
+reduction is at least ETA of the model's; else the second-order correction (the same QP with
+its rows shifted by g(x + d) - g - J d) is tried, then the region shrinks. When the QP has
+no solution in the region, its violated rows ask for a fraction θ of their correction
+(Vardi's relaxation, the largest θ of THETAS that has one); the elastic QP is the last
+resort. ν only grows, as the steps need it (:func:`_steered`), up to PENALTY_MAX.
+Converged when the constraints hold to ``tol_primal`` and ∇f + Jᵀλ_g + λ_x to ``tol_dual``
+(relative to max(1, ‖∇f‖∞))."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..qp import registry
+from ..qp.base import QP, QPSolution
+from .elastic import solve_elastic
+from .hessian import convexified
+from .oracle import Oracle
+
+ETA = 1e-4  # a step is taken when the merit decreases by this fraction of the model's
+RADIUS_MAX = 4.0  # [scaled units] the trust region's largest radius
+PENALTY_MAX = 1e8
+# iterations without the constraints' ℓ1 violation falling by 1 % below its best: the run
+# stops, infeasible (a squat whose thighs cannot part by the margin ran 1000 iterations of
+# relaxed steps that kept the violation where it was)
+STALL_ITERATIONS = 30
+SUCCEEDED = "Solve_Succeeded"  # IPOPT's names: the orchestrator reads both solvers alike
+
+
+@dataclass(frozen=True)
+class SQPOptions:
+    """The SQP's settings."""
+
+    max_iter: int = 100
+    max_time_s: float = 30.0  # [s] wall time of a run (SolverOptions.max_cpu_time)
+    tol_primal: float = 1e-9  # [m, N·m, N] the largest violation of a constraint
+    tol_dual: float = 1e-6  # ‖∇L‖∞ relative to max(1, ‖∇f‖∞)
+    radius: float = 1.0  # [scaled units] the first trust region
+    radius_min: float = 1e-10
+    penalty: float = 1.0  # ν to start from
+    qp: str | None = None  # the QP backend (None: the first available)
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """lbx <= x <= ubx, lbg <= g(x) <= ubg, and the variables' scales (n,) for the region."""
+
+    lbx: np.ndarray
+    ubx: np.ndarray
+    lbg: np.ndarray
+    ubg: np.ndarray
+    scale: np.ndarray
+
+    def violation(self, g: np.ndarray) -> np.ndarray:
+        """(m,) how far each row is outside its bounds (0 inside)."""
+        return np.maximum(np.maximum(self.lbg - g, g - self.ubg), 0.0)
+
+
+@dataclass
+class SQPRun:
+    """What one SQP run found."""
+
+    x: np.ndarray  # (n,)
+    f: float
+    lam_g: np.ndarray  # (m,)
+    lam_x: np.ndarray  # (n,)
+    status: str
+    iterations: int
+    qp_iterations: int
+    duals: np.ndarray | None  # (n + m,) the last QP's multipliers: its working set
+    wall_s: float
+    modified_hessians: int = 0
+    relaxed_qps: int = 0
+    elastic_qps: int = 0
+    history: list[tuple[float, float, float]] = field(default_factory=list)  # f, viol, Δ
+
+
+@dataclass
+class _Stall:
+    """The best ℓ1 violation so far and the iterations since it last fell by 1 %."""
+
+    best: float
+    since: int = 0
+
+    def stuck(self, violation: float, options: SQPOptions) -> bool:
+        """Count this iteration; True after STALL_ITERATIONS without progress while the
+        constraints do not hold."""
+        if violation < 0.99 * self.best or violation <= options.tol_primal:
+            self.best, self.since = min(self.best, violation), 0
+            return False
+        self.since += 1
+        return self.since >= STALL_ITERATIONS
+
+
+@dataclass
+class _Iterate:
+    x: np.ndarray
+    f: float
+    grad: np.ndarray
+    g: np.ndarray
+    J: np.ndarray
+
+
+def sqp(
+    oracle: Oracle,
+    x0: np.ndarray,
+    bounds: Bounds,
+    options: SQPOptions,
+    lam_g0: np.ndarray | None = None,
+    lam_x0: np.ndarray | None = None,
+    duals0: np.ndarray | None = None,
+) -> SQPRun:
+    """Solve min f s.t. the bounds from x0 (with multipliers and a working set when given)."""
+    t0 = time.perf_counter()
+    run, it = _first(oracle, x0, bounds, lam_g0, lam_x0, duals0)
+    lam_g, lam_x = run.lam_g, run.lam_x
+    radius, penalty = options.radius, options.penalty
+    B: np.ndarray | None = None
+    stall = _Stall(float(np.sum(bounds.violation(it.g))))
+    for _ in range(options.max_iter):
+        stop = _stop(it, lam_g, lam_x, bounds, options, stall, t0)
+        if stop is not None:
+            run.status = stop
+            break
+        if B is None:
+            H = oracle.hessian(it.x, 1.0, lam_g)
+            B, modified = convexified(H, bounds.scale)
+            run.modified_hessians += modified
+        run.iterations += 1
+        qp = _qp(it, B, bounds, radius, run.duals)
+        sol, penalty = _step(qp, it, B, bounds, penalty, options, run)
+        if not sol.solved:
+            run.status = "Error_In_Step_Computation"
+            break
+        d_size = float(np.max(np.abs(sol.d) / bounds.scale, initial=0.0))
+        if d_size < 1e-12:  # the QP stays where it is: its multipliers are the news
+            lam_g, lam_x = sol.lam_rows, _own_bound_multipliers(sol, qp, it, bounds)
+            if _converged(it, lam_g, lam_x, bounds, options):
+                run.status = SUCCEEDED
+            else:
+                run.status = _stalled(it, bounds, options)
+            break
+        run.history.append((it.f, _max_abs(bounds.violation(it.g)), radius))
+        step = _try_step(oracle, it, B, sol, qp, bounds, penalty, options)
+        if step is None:  # rejected: a smaller region
+            radius = 0.25 * min(radius, d_size)
+            if radius < options.radius_min:
+                run.status = _stalled(it, bounds, options)
+                break
+            continue
+        it, ratio = step
+        lam_g = sol.lam_rows
+        lam_x = _own_bound_multipliers(sol, qp, it, bounds)
+        B = None
+        if ratio > 0.75 and d_size >= 0.99 * radius:
+            radius = min(2.0 * radius, RADIUS_MAX)
+    else:
+        if _converged(it, lam_g, lam_x, bounds, options):
+            run.status = SUCCEEDED
+    run.x, run.f, run.lam_g, run.lam_x = it.x, it.f, lam_g, lam_x
+    run.wall_s = time.perf_counter() - t0
+    return run
+
+
+def _stop(
+    it: _Iterate,
+    lam_g: np.ndarray,
+    lam_x: np.ndarray,
+    bounds: Bounds,
+    options: SQPOptions,
+    stall: _Stall,
+    t0: float,
+) -> str | None:
+    """Why the run ends before this iteration (converged, out of time, stalled), or None."""
+    if _converged(it, lam_g, lam_x, bounds, options):
+        return SUCCEEDED
+    if time.perf_counter() - t0 > options.max_time_s:
+        return "Maximum_CpuTime_Exceeded"
+    if stall.stuck(float(np.sum(bounds.violation(it.g))), options):
+        return "Infeasible_Problem_Detected"
+    return None
+
+
+def _first(
+    oracle: Oracle,
+    x0: np.ndarray,
+    bounds: Bounds,
+    lam_g0: np.ndarray | None,
+    lam_x0: np.ndarray | None,
+    duals0: np.ndarray | None,
+) -> tuple[SQPRun, _Iterate]:
+    """The run's record and its first iterate (x0 inside its bounds)."""
+    x = np.clip(x0, bounds.lbx, bounds.ubx)
+    lam_g = np.zeros(oracle.m) if lam_g0 is None else np.array(lam_g0, dtype=float)
+    lam_x = np.zeros(oracle.n) if lam_x0 is None else np.array(lam_x0, dtype=float)
+    run = SQPRun(x, 0.0, lam_g, lam_x, "Maximum_Iterations_Exceeded", 0, 0, duals0, 0.0)
+    return run, _Iterate(x, *oracle.first_order(x))
+
+
+def _step(
+    qp: QP,
+    it: _Iterate,
+    B: np.ndarray,
+    bounds: Bounds,
+    penalty: float,
+    options: SQPOptions,
+    run: SQPRun,
+) -> tuple[QPSolution, float]:
+    """The QP's step (relaxed when its rows cannot hold in the region, elastic as the last
+    resort) and the penalty it needs."""
+    sol = _relaxed(qp, options, run)
+    if sol.solved:
+        run.duals = sol.duals
+        penalty = _steered(it, B, sol.d, bounds, penalty)
+    else:
+        sol, penalty = _elastic(qp, it, penalty, options, run)
+    run.qp_iterations += sol.iterations
+    return sol, penalty
+
+
+def _max_abs(v: np.ndarray) -> float:
+    return float(np.max(np.abs(v), initial=0.0))
+
+
+def _converged(
+    it: _Iterate, lam_g: np.ndarray, lam_x: np.ndarray, bounds: Bounds, options: SQPOptions
+) -> bool:
+    """Primal feasibility, stationarity of the Lagrangian, and multipliers of the right sign
+    only at rows at their bounds (complementarity, to tol_dual)."""
+    if _max_abs(bounds.violation(it.g)) > options.tol_primal:
+        return False
+    r = it.grad + it.J.T @ lam_g + lam_x
+    scale = max(1.0, _max_abs(it.grad))
+    if _max_abs(r) > options.tol_dual * scale:
+        return False
+    # a multiplier > 0 needs its row at its upper bound, < 0 at its lower one
+    gap = np.where(lam_g > 0, bounds.ubg - it.g, it.g - bounds.lbg)
+    gap = np.where(np.isfinite(gap), gap, 1e3)
+    return _max_abs(lam_g * gap) <= options.tol_dual * scale
+
+
+def _qp(it: _Iterate, B: np.ndarray, bounds: Bounds, radius: float, duals: np.ndarray | None) -> QP:
+    """The QP at ``it`` in the region of ``radius``."""
+    reach = radius * bounds.scale
+    return QP(
+        B=B,
+        c=it.grad,
+        A=it.J,
+        lb=np.maximum(bounds.lbx - it.x, -reach),
+        ub=np.minimum(bounds.ubx - it.x, reach),
+        lbA=bounds.lbg - it.g,
+        ubA=bounds.ubg - it.g,
+        equal=bounds.lbg == bounds.ubg,
+        dual_start=duals,
+    )
+
+
+# the fractions θ of the violated rows' linearized correction tried when the QP has no
+# solution (Vardi's relaxation; at θ = 0, d = 0 is feasible)
+THETAS = (0.5, 0.25, 0.1, 0.03, 0.01, 0.0)
+
+
+def _relaxed(qp: QP, options: SQPOptions, run: SQPRun) -> QPSolution:
+    """The QP, or when its rows cannot hold in the region, the QP whose violated rows ask for
+    only θ of their correction (the first θ of THETAS that has a solution): the region's
+    step then reduces the violation by θ, and the merit's model says whether that is worth
+    it."""
+    sol = registry.solve(qp, options.qp)
+    if sol.status != "infeasible":
+        return sol
+    lower, upper = qp.lbA > 0, qp.ubA < 0  # rows violated at d = 0
+    for theta in THETAS:
+        run.relaxed_qps += 1
+        lbA, ubA = qp.lbA.copy(), qp.ubA.copy()
+        lbA[lower | qp.equal] *= theta
+        ubA[upper] *= theta
+        ubA[qp.equal] = lbA[qp.equal]
+        relaxed = QP(qp.B, qp.c, qp.A, qp.lb, qp.ub, lbA, ubA, qp.equal, qp.dual_start)
+        sol = registry.solve(relaxed, options.qp)
+        if sol.status != "infeasible":
+            return sol
+    return sol
+
+
+def _elastic(
+    qp: QP, it: _Iterate, penalty: float, options: SQPOptions, run: SQPRun
+) -> tuple[QPSolution, float]:
+    """The elastic QP's step at ν, ν ×10 while the step leaves the linearized violation above
+    90 % of the current one (and ν < PENALTY_MAX)."""
+    v0 = float(np.sum(np.maximum(np.maximum(qp.lbA, -qp.ubA), 0.0)))
+    while True:
+        run.elastic_qps += 1
+        sol = solve_elastic(qp, penalty, options.qp)
+        if not sol.solved or penalty >= PENALTY_MAX:
+            return sol, penalty
+        Ad = qp.A @ sol.d
+        v1 = float(np.sum(np.maximum(np.maximum(qp.lbA - Ad, Ad - qp.ubA), 0.0)))
+        if v1 <= 0.9 * v0 or v1 <= 1e-12:
+            return sol, penalty
+        penalty = min(10.0 * penalty, PENALTY_MAX)
+
+
+def _steered(it: _Iterate, B: np.ndarray, d: np.ndarray, bounds: Bounds, penalty: float) -> float:
+    """ν large enough that the step's predicted reduction is at least half its reduction of
+    the linearized violation, ν ≥ (∇fᵀd + ½dᵀBd) / ((1 - 0.5) Δv) (Nocedal & Wright, 18.36):
+    ν follows what the steps need, not the QP's multipliers (a degenerate QP's run to 1e4)."""
+    dv = float(np.sum(bounds.violation(it.g)) - np.sum(bounds.violation(it.g + it.J @ d)))
+    q = float(it.grad @ d + 0.5 * d @ B @ d)
+    if dv > 1e-14 and q > 0:
+        penalty = max(penalty, q / (0.5 * dv))
+    return min(penalty, PENALTY_MAX)
+
+
+def _model_reduction(
+    it: _Iterate, B: np.ndarray, d: np.ndarray, bounds: Bounds, penalty: float
+) -> float:
+    """ν‖viol(g)‖₁ - (∇fᵀd + ½dᵀBd + ν‖viol(g + J d)‖₁): what the step promises."""
+    v0 = float(np.sum(bounds.violation(it.g)))
+    v1 = float(np.sum(bounds.violation(it.g + it.J @ d)))
+    return penalty * (v0 - v1) - float(it.grad @ d + 0.5 * d @ B @ d)
+
+
+def _try_step(
+    oracle: Oracle,
+    it: _Iterate,
+    B: np.ndarray,
+    sol: QPSolution,
+    qp: QP,
+    bounds: Bounds,
+    penalty: float,
+    options: SQPOptions,
+) -> tuple[_Iterate, float] | None:
+    """The next iterate and its ratio actual / predicted reduction, or None when neither the
+    step nor its second-order correction reduces the merit enough."""
+    pred = _model_reduction(it, B, sol.d, bounds, penalty)
+    merit0 = it.f + penalty * float(np.sum(bounds.violation(it.g)))
+    if pred <= 1e-16 * max(1.0, abs(merit0)):
+        return None
+    x1 = np.clip(it.x + sol.d, bounds.lbx, bounds.ubx)
+    f1, g1 = oracle.value(x1)
+    ratio = (merit0 - f1 - penalty * float(np.sum(bounds.violation(g1)))) / pred
+    if ratio < ETA:
+        # second-order correction: the rows shifted by their curvature along d
+        shift = g1 - it.g - it.J @ sol.d
+        soc = QP(
+            qp.B, qp.c, qp.A, qp.lb, qp.ub, qp.lbA - shift, qp.ubA - shift, qp.equal, sol.duals
+        )
+        corrected = registry.solve(soc, options.qp)
+        if not corrected.solved:
+            return None
+        x1 = np.clip(it.x + corrected.d, bounds.lbx, bounds.ubx)
+        f1, g1 = oracle.value(x1)
+        ratio = (merit0 - f1 - penalty * float(np.sum(bounds.violation(g1)))) / pred
+        if ratio < ETA:
+            return None
+    return _Iterate(x1, *oracle.first_order(x1)), ratio
+
+
+def _own_bound_multipliers(sol: QPSolution, qp: QP, it: _Iterate, bounds: Bounds) -> np.ndarray:
+    """The QP's bound multipliers where the bound is the variable's own (not the region's)."""
+    at_lower = (it.x <= bounds.lbx + 1e-12) & (sol.lam_bounds < 0)
+    at_upper = (it.x >= bounds.ubx - 1e-12) & (sol.lam_bounds > 0)
+    return np.where(at_lower | at_upper, sol.lam_bounds, 0.0)
+
+
+def _stalled(it: _Iterate, bounds: Bounds, options: SQPOptions) -> str:
+    """Why the region shrank to nothing: infeasible when the constraints do not hold."""
+    if _max_abs(bounds.violation(it.g)) > options.tol_primal:
+        return "Infeasible_Problem_Detected"
+    return "Search_Direction_Becomes_Too_Small"

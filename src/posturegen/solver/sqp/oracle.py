@@ -1,0 +1,108 @@
+"""The program's functions at one parameter vector, dense, for the SQP: the cost f, its
+gradient ∇f (n,), the constraints g (m,), their Jacobian J (m, n) and the Hessian of the
+Lagrangian ∇²(σ f + λᵀ g) (n, n). They are the functions IPOPT calls (generated C when the
+structure's library is built, :mod:`posturegen.solver.codegen`), taken from its solver and
+evaluated through CasADi's buffers: the inputs and outputs are numpy arrays written in place
+(a call through ``Function.call`` and ``DM.full`` cost 74 µs more each, more than the
+generated code of Talos' Jacobian itself)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import casadi as ca
+import numpy as np
+
+
+class _Buffered:
+    """One function evaluated into preallocated arrays: its inputs (set in place by the
+    caller), its outputs' nonzeros, and where those go in a dense array."""
+
+    def __init__(self, fn: ca.Function, inputs: list[np.ndarray]) -> None:
+        self.inputs = inputs
+        self.outputs = [np.zeros(fn.nnz_out(i)) for i in range(fn.n_out())]
+        buffer, self._trigger = fn.buffer()
+        for i, a in enumerate(inputs):
+            buffer.set_arg(i, memoryview(a))
+        for i, r in enumerate(self.outputs):
+            buffer.set_res(i, memoryview(r))
+        self._buffer = buffer  # kept alive with the arrays it points to
+        self.sparsity = [fn.sparsity_out(i) for i in range(fn.n_out())]
+
+    def __call__(self) -> list[np.ndarray]:
+        self._trigger()
+        return self.outputs
+
+    def scatter(self, i: int) -> Callable[[np.ndarray, np.ndarray], None]:
+        """A function writing output ``i``'s nonzeros into a dense array (zeros elsewhere)."""
+        sp = self.sparsity[i]
+        rows, cols = sp.get_triplet()
+        flat = np.asarray(rows, dtype=np.intp) * sp.size2() + np.asarray(cols, dtype=np.intp)
+
+        def write(nonzeros: np.ndarray, dense: np.ndarray) -> None:
+            dense.ravel()[flat] = nonzeros
+
+        return write
+
+
+class Oracle:
+    """f, ∇f, g, J and ∇²L of a compiled structure at parameters ``p``; the arrays returned
+    are the oracle's own and change at its next call of the same kind."""
+
+    def __init__(self, solver: ca.Function, p: np.ndarray) -> None:
+        grad_f = solver.get_function("nlp_grad_f")
+        self.n = int(grad_f.size1_out(1))
+        g_fn = solver.get_function("nlp_g")
+        self.m = int(g_fn.size1_out(0))
+        self._x = np.zeros(self.n)
+        self._p = np.array(p, dtype=float).ravel()
+        self._sigma = np.ones(1)
+        self._lam = np.zeros(self.m)
+        xp = [self._x, self._p]
+        self._f = _Buffered(solver.get_function("nlp_f"), xp)
+        self._g = _Buffered(g_fn, xp)
+        self._grad = _Buffered(grad_f, xp)
+        self._jac = _Buffered(solver.get_function("nlp_jac_g"), xp)
+        self._hess = _Buffered(solver.get_function("nlp_hess_l"), [*xp, self._sigma, self._lam])
+        self._dense = {
+            "g": (self._g.scatter(0), np.zeros(self.m)),
+            "grad": (self._grad.scatter(1), np.zeros(self.n)),
+            "g_jac": (self._jac.scatter(0), np.zeros(self.m)),
+            "jac": (self._jac.scatter(1), np.zeros((self.m, self.n))),
+            "hess": (self._hess.scatter(0), np.zeros((self.n, self.n))),
+        }
+        self.evaluations = 0
+
+    def _dense_of(self, name: str, nonzeros: np.ndarray) -> np.ndarray:
+        write, out = self._dense[name]
+        write(nonzeros, out)
+        return out.copy()
+
+    def value(self, x: np.ndarray) -> tuple[float, np.ndarray]:
+        """f(x) and g(x) (m,)."""
+        self._x[:] = x
+        self.evaluations += 2
+        f = float(self._f()[0][0])
+        return f, self._dense_of("g", self._g()[0])
+
+    def first_order(self, x: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        """f, ∇f (n,), g (m,) and J (m, n) at x."""
+        self._x[:] = x
+        self.evaluations += 2
+        f_nz, grad_nz = self._grad()
+        g_nz, jac_nz = self._jac()
+        return (
+            float(f_nz[0]),
+            self._dense_of("grad", grad_nz),
+            self._dense_of("g_jac", g_nz),
+            self._dense_of("jac", jac_nz),
+        )
+
+    def hessian(self, x: np.ndarray, sigma: float, lam_g: np.ndarray) -> np.ndarray:
+        """∇²(σ f + λᵀ g) (n, n) at x, symmetric (the functions give its upper triangle)."""
+        self._x[:] = x
+        self._sigma[0] = sigma
+        self._lam[:] = lam_g
+        self.evaluations += 1
+        upper = self._dense_of("hess", self._hess()[0])
+        return upper + np.triu(upper, 1).T

@@ -1,0 +1,199 @@
+"""The SQP core (posturegen.solver.sqp): its QP backends, the Hessian's convexification, the
+postures it finds (IPOPT's, verified), the solver option, row order, warm starts and the
+fallback to IPOPT."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from posturegen import solve
+from posturegen.bench_reach import reach_balance_family
+from posturegen.cli import _solvers
+from posturegen.errors import InputError, PosturegenError
+from posturegen.solver import runs as runs_module
+from posturegen.solver.inspection import initial_collision_term
+from posturegen.solver.problem import Program, SolverOptions
+from posturegen.solver.qp import registry
+from posturegen.solver.qp.base import QP
+from posturegen.solver.runs import variable_scales
+from posturegen.solver.sqp.core import Bounds, SQPOptions, SQPRun, sqp
+from posturegen.solver.sqp.hessian import DELTA, convexified
+from posturegen.solver.sqp.oracle import Oracle
+
+
+def _random_qp(rng: np.random.Generator, n: int = 12, m: int = 9) -> QP:
+    """A strictly convex QP with a feasible point: 2 equality rows, 2 one-sided, the others
+    two-sided, and bounds."""
+    M = rng.normal(size=(n, n))
+    A = rng.normal(size=(m, n))
+    inside = A @ rng.uniform(-0.2, 0.2, n)
+    lbA, ubA = inside - rng.uniform(0.0, 0.3, m), inside + rng.uniform(0.0, 0.3, m)
+    lbA[:2] = ubA[:2] = inside[:2]
+    ubA[2:4] = np.inf
+    c = 5.0 * rng.normal(size=n)  # far from the box's centre: bounds and rows become active
+    box = np.full(n, 0.3)
+    return QP(M @ M.T + np.eye(n), c, A, -box, box, lbA, ubA, lbA == ubA)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_qp_backends_agree_and_meet_kkt(seed):
+    """Each backend: B d + c + λ_d + Aᵀλ_A = 0, the rows and bounds hold, a multiplier only
+    on a bound that holds with equality and of its sign; the backends agree."""
+    qp = _random_qp(np.random.default_rng(seed))
+    solutions = {name: registry.backend(name).solve(qp) for name in registry.available()}
+    assert set(solutions) == {"daqp", "proxsuite"}
+    for name, sol in solutions.items():
+        assert sol.solved, name
+        residual = qp.B @ sol.d + qp.c + sol.lam_bounds + qp.A.T @ sol.lam_rows
+        assert np.abs(residual).max() < 1e-6, name
+        Ad = qp.A @ sol.d
+        assert np.all(Ad >= qp.lbA - 1e-7) and np.all(Ad <= qp.ubA + 1e-7), name
+        assert np.all(sol.lam_rows[Ad < qp.ubA - 1e-6] <= 1e-6), name
+        assert np.all(sol.lam_rows[Ad > qp.lbA + 1e-6] >= -1e-6), name
+        assert np.all(sol.lam_bounds[sol.d < qp.ub - 1e-6] <= 1e-6), name
+        assert np.all(sol.lam_bounds[sol.d > qp.lb + 1e-6] >= -1e-6), name
+        assert np.abs(sol.lam_bounds).max() > 1e-3  # the test reaches the bounds
+    np.testing.assert_allclose(solutions["daqp"].d, solutions["proxsuite"].d, atol=1e-6)
+
+
+def test_infeasible_qp_is_reported_not_solved():
+    qp = _random_qp(np.random.default_rng(3))
+    qp.lbA[4], qp.ubA[4] = 1e3, np.inf  # a row no point of the box reaches
+    assert registry.solve(qp).status == "infeasible"
+
+
+def test_convexified_lifts_semidefinite_and_clips_negative_curvature():
+    rng = np.random.default_rng(4)
+    scale = np.concatenate([np.ones(6), np.full(4, 900.0)])
+    M = rng.normal(size=(6, 6))
+    H = np.zeros((10, 10))
+    H[:6, :6] = M @ M.T + np.eye(6)  # positive on the first block, zero on the "forces"
+    B, modified = convexified(H, scale)
+    assert not modified
+    np.testing.assert_allclose(B, H + np.diag(DELTA / scale**2), rtol=1e-12, atol=1e-15)
+    H[0, 0] = -50.0  # negative curvature
+    B, modified = convexified(H, scale)
+    assert modified
+    Bs = B * np.outer(scale, scale)
+    w, V = np.linalg.eigh(H * np.outer(scale, scale))
+    assert np.linalg.eigvalsh(Bs).min() >= DELTA * (1 - 1e-9)
+    # the eigenvalues above δ and every eigenvector kept
+    np.testing.assert_allclose(Bs @ V, V * np.maximum(w, DELTA), atol=1e-8)
+
+
+def _with(problem, **options):
+    return dataclasses.replace(
+        problem, solver_options=dataclasses.replace(problem.solver_options, **options)
+    )
+
+
+@pytest.fixture(scope="module")
+def free_problems():
+    return list(reach_balance_family(False)(4, 21))
+
+
+def test_sqp_finds_ipopts_verified_postures(free_problems):
+    for problem in free_problems[:3]:
+        by_sqp = solve(_with(problem, method="sqp"))
+        by_ipopt = solve(_with(problem, method="ipopt"))
+        assert by_sqp.success and by_ipopt.success, (by_sqp.message, by_ipopt.message)
+        assert by_sqp.method == "sqp" and by_ipopt.method == "ipopt"
+        assert by_sqp.iterations_by_method == {"sqp": by_sqp.iterations}
+        assert abs(by_sqp.cost - by_ipopt.cost) <= 1e-6 * max(1.0, abs(by_ipopt.cost))
+        np.testing.assert_allclose(by_sqp.q, by_ipopt.q, atol=1e-4)
+
+
+class _Permuted:
+    """An oracle whose constraint rows come in another order."""
+
+    def __init__(self, oracle: Oracle, order: np.ndarray) -> None:
+        self.oracle, self.order = oracle, order
+        self.n, self.m = oracle.n, oracle.m
+
+    def value(self, x):
+        f, g = self.oracle.value(x)
+        return f, g[self.order]
+
+    def first_order(self, x):
+        f, grad, g, J = self.oracle.first_order(x)
+        return f, grad, g[self.order], J[self.order]
+
+    def hessian(self, x, sigma, lam_g):
+        lam = np.empty_like(lam_g)
+        lam[self.order] = lam_g
+        return self.oracle.hessian(x, sigma, lam)
+
+
+def _core_inputs(program: Program):
+    compiled = program.compile()
+    compiled.refresh()
+    x0, p, lbg, ubg = program.numeric(compiled)
+    scales = variable_scales(compiled, program.robot.weight)
+    return Oracle(compiled.solver, p), x0, Bounds(compiled.lbx, compiled.ubx, lbg, ubg, scales)
+
+
+@pytest.mark.parametrize("collision", [False, True])
+def test_row_order_does_not_decide_the_solution(collision):
+    """The program's rows in three random orders (blocks and rows within them mixed): the
+    same solution, from the same start, each time."""
+    problem = next(iter(reach_balance_family(collision)(1, 23)))
+    program = Program.of(problem)
+    if collision:
+        _active, term = initial_collision_term(problem)
+        program = Program.of(problem, collision_term=term)
+    oracle, x0, bounds = _core_inputs(program)
+    reference = sqp(oracle, x0, bounds, SQPOptions())
+    assert reference.status == "Solve_Succeeded"
+    for seed in range(3):
+        order = np.random.default_rng(seed).permutation(oracle.m)
+        permuted = Bounds(
+            bounds.lbx, bounds.ubx, bounds.lbg[order], bounds.ubg[order], bounds.scale
+        )
+        run = sqp(_Permuted(oracle, order), x0, permuted, SQPOptions())
+        assert run.status == "Solve_Succeeded", seed
+        np.testing.assert_allclose(run.x, reference.x, atol=1e-6)
+        np.testing.assert_allclose(run.lam_g, reference.lam_g[order], atol=1e-5)
+
+
+def test_a_start_at_the_solution_with_its_multipliers_takes_no_iteration(free_problems):
+    problem = _with(free_problems[3], method="sqp")
+    first = solve(problem)
+    assert first.success and first.iterations > 3
+    again = solve(problem, start=first)
+    assert again.success and again.method == "sqp"
+    assert again.iterations <= 1
+
+
+def test_auto_falls_back_to_ipopt_from_the_same_start(free_problems, monkeypatch):
+    def failing(oracle, x0, bounds, options, **kwargs):
+        n, m = oracle.n, oracle.m
+        return SQPRun(
+            x0, 0.0, np.zeros(m), np.zeros(n), "Maximum_Iterations_Exceeded", 7, 7, None, 0.0
+        )
+
+    monkeypatch.setattr(runs_module, "sqp", failing)
+    result = solve(_with(free_problems[0], method="auto"))
+    assert result.success and result.method == "ipopt"
+    assert result.iterations_by_method["sqp"] == 7
+    assert result.iterations == 7 + result.iterations_by_method["ipopt"]
+    only_sqp = solve(_with(free_problems[0], method="sqp"))
+    assert not only_sqp.success and "the SQP did not converge" in only_sqp.message
+
+
+def test_solver_names_are_checked(monkeypatch):
+    with pytest.raises(InputError, match=r"^options.solver.method: unknown solver 'snopt'"):
+        SolverOptions(method="snopt")
+    with pytest.raises(InputError, match=r"^options.solver.qp: unknown QP solver 'osqp'"):
+        SolverOptions(qp="osqp")
+    monkeypatch.setenv("POSTUREGEN_SOLVER", "fast")
+    with pytest.raises(InputError, match=r"^\$POSTUREGEN_SOLVER: unknown solver 'fast'"):
+        SolverOptions().solver_method()
+    monkeypatch.setenv("POSTUREGEN_SOLVER", "ipopt")
+    assert SolverOptions().solver_method() == "ipopt"
+    assert SolverOptions(method="sqp").solver_method() == "sqp"
+    assert _solvers("sqp, ipopt") == ["sqp", "ipopt"]
+    with pytest.raises(PosturegenError, match="--solver: unknown solver 'snopt'"):
+        _solvers("sqp,snopt")
