@@ -55,12 +55,16 @@ def demo_names() -> list[str]:
     return sorted(p.stem for p in _demo_dir().glob("*.yaml"))
 
 
+_SOLVER_NAMES = {"sqp": "SQP", "ipopt": "IPOPT"}  # how a Result's solver is printed
+
+
 def _solve_to(problem_path: Path, out: Path, quiet: bool = False, png: str | None = None) -> int:
 
     result = solve_diagnosed(load_problem(problem_path))
     path = result.write(out / "posture.json")
     effort = (
-        f"IPOPT {result.status}, {result.iterations} iterations, "
+        f"{_SOLVER_NAMES.get(result.method, result.method)} {result.status}, "
+        f"{result.iterations} iterations, "
         f"{1e3 * result.solve_time_s:.1f} ms (+{1e3 * result.build_time_s:.0f} ms build)"
     )
     if not result.success:  # one line on stderr: what blocks it
@@ -166,7 +170,8 @@ def _run_sequence(seq: dict, out: Path, quiet: bool, png: str | None, final: boo
         r = rep.result
         state = "ok" if r.success else "FAILED"
         line = (
-            f"[{bar}] {k + 1}/{n} {name}: {state}, {r.iterations} it, IPOPT "
+            f"[{bar}] {k + 1}/{n} {name}: {state}, {r.iterations} it, "
+            f"{_SOLVER_NAMES.get(r.method, r.method)} "
             f"{1e3 * r.solve_time_s:.0f} ms, stage {rep.wall_time_s:.1f} s, "
             f"total {elapsed:.1f} s"
         )

@@ -38,7 +38,7 @@ def category(answer: Result | BatchError) -> str:
     if isinstance(diagnosis, dict):
         causes = diagnosis.get("causes") or []
         return f"blocked: {causes[0]['kind']}" if causes else "no constraint blocks it"
-    return f"IPOPT: {answer.status}"
+    return f"{'SQP' if answer.method == 'sqp' else 'IPOPT'}: {answer.status}"
 
 
 def percentile(values: Sequence[float], q: float) -> float:
