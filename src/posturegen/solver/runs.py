@@ -15,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from .compile import CompiledNLP, is_compiled
+from .._cache import BoundedCache, Ref
+from .compile import CACHE_SIZE, CompiledNLP, is_compiled
 from .problem import Program
 from .sqp.core import Bounds, SQPOptions, sqp
 from .sqp.oracle import Oracle
@@ -220,6 +221,11 @@ def variable_scales(compiled: CompiledNLP, weight: float) -> np.ndarray:
     return scale
 
 
+# the SQP's oracle per solver (its library's functions and their buffers, 1 ms to make on
+# Talos' reach: a third of a free call's solve)
+_ORACLES: BoundedCache[Oracle] = BoundedCache("SQP oracles", CACHE_SIZE)
+
+
 def _sqp(start: _Start) -> Run:
     """The SQP from ``start``; its first working set from the start's multipliers."""
     compiled, options = start.compiled, start.program.solver_options
@@ -230,8 +236,10 @@ def _sqp(start: _Start) -> Run:
     duals = None
     if start.lam_g is not None and start.lam_x is not None:
         duals = np.concatenate([start.lam_x, start.lam_g])
-    with compiled.lock:
-        oracle = Oracle(compiled.solver, start.p)
+    with compiled.lock:  # the oracle's buffers are the structure's: one run at a time
+        oracle = _ORACLES.get_or_make(
+            Ref(compiled.solver), lambda: Oracle(compiled.solver, start.p)
+        ).set_parameters(start.p)
         run = sqp(
             oracle,
             start.x,

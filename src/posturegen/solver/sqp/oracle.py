@@ -73,6 +73,11 @@ class Oracle:
         }
         self.evaluations = 0
 
+    def set_parameters(self, p: np.ndarray) -> Oracle:
+        """Evaluate at parameters ``p`` from now on (the same structure: buffers reused)."""
+        self._p[:] = np.asarray(p, dtype=float).ravel()
+        return self
+
     def _dense_of(self, name: str, nonzeros: np.ndarray) -> np.ndarray:
         write, out = self._dense[name]
         write(nonzeros, out)
