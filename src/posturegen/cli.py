@@ -40,7 +40,7 @@ from .io.problem_file import load_problem, read_yaml
 from .planner.command import add_parser as add_plan_parser
 from .solver.diagnose import solve_diagnosed
 from .solver.inspection import describe
-from .solver.problem import METHODS
+from .solver.problem import DEFAULT_METHOD, METHODS
 from .verify import verify_file
 
 EXIT_OK, EXIT_NOT_FOUND, EXIT_INPUT = 0, 1, 2
@@ -298,7 +298,7 @@ def _solvers(value: str) -> list[str]:
                 f"--solver: unknown solver '{solver}' (use {', '.join(METHODS)}, or several "
                 "separated by commas)"
             )
-    return solvers or ["auto"]
+    return solvers or [DEFAULT_METHOD]
 
 
 @contextlib.contextmanager
@@ -420,9 +420,9 @@ def _add_bench_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jit", action="store_true", help="compile the solvers to C first (needs gcc)")
     p.add_argument(
         "--solver",
-        default="auto",
-        help="the solver of every problem: auto (the SQP, IPOPT when it fails), sqp or ipopt; "
-        "several separated by commas run one after the other (sqp,ipopt)",
+        default=DEFAULT_METHOD,
+        help="the solver of every problem: ipopt (default), sqp, or auto (the SQP, IPOPT when "
+        "it fails); several separated by commas run one after the other (sqp,ipopt)",
     )
     p.add_argument(
         "--batch",
