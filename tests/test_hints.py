@@ -173,3 +173,15 @@ def test_chain_length_bounds_the_distance_of_two_joints(robot, seed):
     for a, b in joints:
         d = np.linalg.norm(data.oMi[int(a)].translation - data.oMi[int(b)].translation)
         assert d <= chain_length(model, int(a), int(b)) + 1e-9
+
+
+def test_a_name_looked_up_among_none_known_is_a_one_line_input_error() -> None:
+    """A contact on a surface, in a scene that has none: the error names the field, not a
+    difflib ValueError (get_close_matches refuses n = 0)."""
+    assert close_names("ground", []) == []
+    data = {
+        "robot": "talos",
+        "contacts": [{"robot_patch": "left_sole", "surface": "ground", "type": "fixed"}],
+    }
+    message = _error(data)
+    assert message.startswith("contacts[0].surface") and "\n" not in message

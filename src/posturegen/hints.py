@@ -19,6 +19,8 @@ def close_names(name: str, known: Iterable[str], n: int = MAX_HINTS) -> list[str
     """Up to ``n`` known names close to ``name`` (none equal to it)."""
     name = str(name)
     known = list(dict.fromkeys(str(k) for k in known if str(k) != name))
+    if not known:  # nothing to suggest (difflib refuses to look for 0 matches)
+        return []
     low = name.lower()
 
     def ratio(k: str) -> float:

@@ -9,6 +9,7 @@ one) and its working set, which warm-starts the next QP of the same shape."""
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 from dataclasses import dataclass
 from typing import Protocol
@@ -62,6 +63,8 @@ class QPBackend(Protocol):
     def solve(self, qp: QP) -> QPSolution: ...
 
 
+@functools.cache
 def importable(module: str) -> bool:
-    """Whether ``module`` can be imported here (a backend's ``available``)."""
+    """Whether ``module`` can be imported here (a backend's ``available``); looked up once per
+    process (a lookup walks sys.path: 0.3 ms, once per QP of an SQP before this cache)."""
     return importlib.util.find_spec(module) is not None
