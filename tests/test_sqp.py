@@ -197,3 +197,68 @@ def test_solver_names_are_checked(monkeypatch):
     assert _solvers("sqp, ipopt") == ["sqp", "ipopt"]
     with pytest.raises(PosturegenError, match="--solver: unknown solver 'snopt'"):
         _solvers("sqp,snopt")
+
+
+def test_row_order_does_not_decide_a_shipped_climb(monkeypatch, tmp_path):
+    """HRP-2's inclined ladder under ``auto``: the SQP sees every stage's rows (blocks, and
+    rows within them) in three random orders, and every stage verifies each time. (The
+    postures are not the same in every order: a stage's SQP may end at another local
+    solution, up to 4 cm away on this climb; the QP's working sets, and so the path, depend
+    on the order where the QPs are degenerate.)"""
+    from posturegen.climb.sequence import run_sequence
+    from posturegen.scenes import scene
+    from posturegen.verify import verify_file
+
+    monkeypatch.setenv("POSTUREGEN_SOLVER", "auto")
+    original = runs_module.sqp
+
+    def climbed(seed: int) -> list[str]:
+        def permuted(oracle, x0, bounds, options, **kwargs):
+            order = np.random.default_rng(seed).permutation(oracle.m)
+            rows = Bounds(
+                bounds.lbx, bounds.ubx, bounds.lbg[order], bounds.ubg[order], bounds.scale
+            )
+            if kwargs.get("lam_g0") is not None:
+                kwargs["lam_g0"] = kwargs["lam_g0"][order]
+            if kwargs.get("duals0") is not None:
+                n = oracle.n
+                duals = kwargs["duals0"]
+                kwargs["duals0"] = np.concatenate([duals[:n], duals[n:][order]])
+            run = original(_Permuted(oracle, order), x0, rows, options, **kwargs)
+            run.lam_g = run.lam_g[np.argsort(order)]  # the program's order, for the caller
+            return run
+
+        monkeypatch.setattr(runs_module, "sqp", permuted)
+        out = tmp_path / f"order-{seed}"
+        report = run_sequence(scene("ladder-inclined", "hrp2", 1), out)
+        assert len(report.stages) == report.planned, (seed, report.stages[-1].result.message)
+        for stage in report.stages:
+            assert verify_file(out / stage.posture_file).ok, (seed, stage.name)
+        return [stage.result.method for stage in report.stages]
+
+    for seed in range(3):
+        assert any(method == "sqp" for method in climbed(seed))  # the SQP found stages
+
+
+def test_an_elastic_step_whose_violation_cannot_fall_stops_raising_the_penalty():
+    """A row violated by 1 that the region lets move by 0.02 at most: the elastic QP's step
+    cannot cut the linearized violation by 10 %, and ν is raised ELASTIC_RAISES times, not
+    up to PENALTY_MAX (each raise an elastic QP; at 1e8 they failed and took seconds)."""
+    from posturegen.solver.sqp import core
+
+    qp = QP(
+        B=np.eye(2),
+        c=np.zeros(2),
+        A=np.array([[1.0, 1.0]]),
+        lb=np.full(2, -0.01),
+        ub=np.full(2, 0.01),
+        lbA=np.array([1.0]),
+        ubA=np.array([np.inf]),
+        equal=np.array([False]),
+    )
+    run = SQPRun(np.zeros(2), 0.0, np.zeros(1), np.zeros(2), "", 0, 0, None, 0.0)
+    sol, penalty = core._elastic(qp, None, 1.0, SQPOptions(), run)
+    assert sol.solved
+    np.testing.assert_allclose(sol.d, [0.01, 0.01], atol=1e-8)  # as far as the region goes
+    assert run.elastic_qps == core.ELASTIC_RAISES + 1
+    assert penalty == 10.0**core.ELASTIC_RAISES

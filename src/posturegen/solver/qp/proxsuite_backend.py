@@ -8,7 +8,10 @@ import numpy as np
 from .base import QP, QPSolution, importable
 
 EPS_ABS = 1e-10
-MAX_ITER = 10_000
+# its outer iterations: a fallback QP that daqp failed on is badly scaled, and proxsuite then
+# ran 80,000 iterations (7-10 s) on an elastic QP of 62 + 70 variables; bounded, it says
+# "failed" and the SQP's run ends in 0.1 s instead
+MAX_ITER = 1000
 _BIG = 1e20  # proxsuite's "no bound"
 
 

@@ -294,22 +294,30 @@ def _relaxed(qp: QP, options: SQPOptions, run: SQPRun) -> QPSolution:
     return sol
 
 
+# ν ×10 at most this many times within one step's elastic QPs: a linearization whose violation
+# cannot fall keeps asking for more (Talos' squat whose thighs cannot part by 1 cm: ν ran to
+# PENALTY_MAX, daqp failed on the QP's scaling and proxsuite took seconds per QP, 154 s in one
+# run of 28 iterations)
+ELASTIC_RAISES = 2
+
+
 def _elastic(
     qp: QP, it: _Iterate, penalty: float, options: SQPOptions, run: SQPRun
 ) -> tuple[QPSolution, float]:
-    """The elastic QP's step at ν, ν ×10 while the step leaves the linearized violation above
-    90 % of the current one (and ν < PENALTY_MAX)."""
+    """The elastic QP's step at ν, ν ×10 (ELASTIC_RAISES times at most) while the step leaves
+    the linearized violation above 90 % of the current one (and ν < PENALTY_MAX)."""
     v0 = float(np.sum(np.maximum(np.maximum(qp.lbA, -qp.ubA), 0.0)))
-    while True:
+    for raised in range(ELASTIC_RAISES + 1):
         run.elastic_qps += 1
         sol = solve_elastic(qp, penalty, options.qp)
-        if not sol.solved or penalty >= PENALTY_MAX:
-            return sol, penalty
+        if not sol.solved or penalty >= PENALTY_MAX or raised == ELASTIC_RAISES:
+            break
         Ad = qp.A @ sol.d
         v1 = float(np.sum(np.maximum(np.maximum(qp.lbA - Ad, Ad - qp.ubA), 0.0)))
         if v1 <= 0.9 * v0 or v1 <= 1e-12:
-            return sol, penalty
+            break
         penalty = min(10.0 * penalty, PENALTY_MAX)
+    return sol, penalty
 
 
 def _steered(it: _Iterate, B: np.ndarray, d: np.ndarray, bounds: Bounds, penalty: float) -> float:
