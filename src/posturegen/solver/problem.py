@@ -38,10 +38,9 @@ from .qp import registry as qp_registry
 # iterations instead of 15,417 (ATLAS stairs 7929 -> 3682, HRP-2 vertical ladder 2089 -> 2530)
 # the solvers a problem may ask for (SolverOptions.method)
 METHODS = ("auto", "sqp", "ipopt")
-# IPOPT until the SQP's fallback layers are simplified: with "auto", Talos' 4-step stairs plan
-# took 150.6 s warm against 14.3 s with IPOPT alone (the same postures verified), HRP-2's
-# vertical ladder climb 409 s against 137 s; the never-seen families are mixed (SQP faster on
-# the varied stances, 29 against 42 ms median, slower on reach-balance, 36 against 28 ms)
+# IPOPT: where the SQP fails, "auto" pays both solvers (warm, 2026-12-04: Talos' 4-step stairs
+# plan 20.7 s against 13.3 s with IPOPT alone, HRP-2's vertical ladder 27.8 against 17.6 s);
+# on the never-seen families auto's median call is as fast or faster (README)
 DEFAULT_METHOD = "ipopt"
 
 MUMPS_SCALING = {"ipopt.mumps_scaling": 0, "ipopt.mumps_permuting_scaling": 0}
