@@ -126,6 +126,11 @@ class _Permuted:
         lam[self.order] = lam_g
         return self.oracle.hessian(x, sigma, lam)
 
+    def bounds(self, bounds: Bounds) -> Bounds:
+        """``bounds`` with the rows' in this oracle's order."""
+        order = self.order
+        return Bounds(bounds.lbx, bounds.ubx, bounds.lbg[order], bounds.ubg[order], bounds.scale)
+
 
 def _core_inputs(program: Program):
     compiled = program.compile()
@@ -149,10 +154,8 @@ def test_row_order_does_not_decide_the_solution(collision):
     assert reference.status == "Solve_Succeeded"
     for seed in range(3):
         order = np.random.default_rng(seed).permutation(oracle.m)
-        permuted = Bounds(
-            bounds.lbx, bounds.ubx, bounds.lbg[order], bounds.ubg[order], bounds.scale
-        )
-        run = sqp(_Permuted(oracle, order), x0, permuted, SQPOptions())
+        permuted = _Permuted(oracle, order)
+        run = sqp(permuted, x0, permuted.bounds(bounds), SQPOptions())
         assert run.status == "Solve_Succeeded", seed
         np.testing.assert_allclose(run.x, reference.x, atol=1e-6)
         np.testing.assert_allclose(run.lam_g, reference.lam_g[order], atol=1e-5)
@@ -215,16 +218,14 @@ def test_row_order_does_not_decide_a_shipped_climb(monkeypatch, tmp_path):
     def climbed(seed: int) -> list[str]:
         def permuted(oracle, x0, bounds, options, **kwargs):
             order = np.random.default_rng(seed).permutation(oracle.m)
-            rows = Bounds(
-                bounds.lbx, bounds.ubx, bounds.lbg[order], bounds.ubg[order], bounds.scale
-            )
+            shuffled = _Permuted(oracle, order)
             if kwargs.get("lam_g0") is not None:
                 kwargs["lam_g0"] = kwargs["lam_g0"][order]
             if kwargs.get("duals0") is not None:
                 n = oracle.n
                 duals = kwargs["duals0"]
                 kwargs["duals0"] = np.concatenate([duals[:n], duals[n:][order]])
-            run = original(_Permuted(oracle, order), x0, rows, options, **kwargs)
+            run = original(shuffled, x0, shuffled.bounds(bounds), options, **kwargs)
             run.lam_g = run.lam_g[np.argsort(order)]  # the program's order, for the caller
             return run
 
