@@ -143,8 +143,11 @@ def _signed_distance(shape, points):
 
 
 def test_proxies_are_cached_on_disk(tmp_path, monkeypatch):
-    """The first look-up fits and writes the cache file, the next one reads it back."""
+    """A robot with no shipped proxies (a user's own): the first look-up fits and writes the
+    cache file, the next one reads it back."""
     from posturegen.collision import proxies
+
+    monkeypatch.setattr(proxies, "read_shipped", lambda key: None)
 
     robot = load_robot(ROBOTS["hrp2"])
     real = proxy_model(robot)

@@ -2,14 +2,13 @@
 next problems cost, with nothing compiled for them beforehand.
 
 Each collision family runs in a fresh process (``spawn``) whose ``POSTUREGEN_CACHE`` is an
-empty folder but for the robot's fitted proxies (copied from this process's cache: fitting is
-a robot's one-time cost, not a problem's), on problems drawn with a seed that no other pass
-uses (COLD_SEED + the bench's seed). Every call of ``posturegen.solve`` is timed from the
-process's first, in the default code-generation mode (what a user meets): the first call pays
-the robot's program for the contact structure (its declaration and, with a C compiler, its
-compilation), the later ones nothing but their solve. The same problems are written for a peer
-solver (:mod:`posturegen.bench_peer`, ``tools/drake_peer.sh``), so that "x times Drake" is
-measured on them.
+empty folder (the robot's fitted proxies ship in the package), on problems drawn with a seed
+that no other pass uses (COLD_SEED + the bench's seed). Every call of ``posturegen.solve`` is
+timed from the process's first, in the default code-generation mode (what a user meets): the
+first call pays the robot's program for the contact structure (its declaration and, with a C
+compiler, its compilation), the later ones nothing but their solve. The same problems are
+written for a peer solver (:mod:`posturegen.bench_peer`, ``tools/drake_peer.sh``), so that
+"x times Drake" is measured on them.
 """
 
 from __future__ import annotations
@@ -32,9 +31,6 @@ import numpy as np
 from .bench import FAMILIES
 from .bench_peer import export_problem, write_problems
 from .bench_reach import PLANNER_FAMILIES
-from .collision.proxies import cache_dir as proxies_dir
-from .collision.proxies import proxy_model
-from .model.robot import load_bundled
 from .solver import compile as compile_module
 from .solver.solve import solve
 
@@ -125,10 +121,8 @@ def run_cold(name: str, n: int = 50, seed: int = 0, peer_file: Path | None = Non
     """A family's never-seen pass in a fresh process with an empty cache (see the module doc);
     with ``peer_file``, its problems are also written there for the peer solver."""
     draw = COLD_SEED + seed
-    proxy_model(load_bundled("talos"))  # fitted once for the robot (untimed), then copied
     root = Path(tempfile.mkdtemp(prefix="posturegen-cold-"))
     try:
-        shutil.copytree(proxies_dir(), root / "proxies")
         if peer_file is not None:
             items = [export_problem(p, name, i) for i, p in enumerate(_generator(name)(n, draw))]
             write_problems(peer_file, items)

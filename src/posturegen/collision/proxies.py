@@ -12,6 +12,7 @@ than there minus SLIDE, and the mesh check decides.
 from __future__ import annotations
 
 import hashlib
+import importlib.resources
 import json
 import os
 from dataclasses import dataclass, field
@@ -311,7 +312,8 @@ def robot_spheres(
     """The robot's proxies (:func:`posturegen.collision.proxy_fit.fit_robot`), fitted once and
     cached on disk (:func:`cache_dir`) under ``key`` (default: :func:`_cache_key`); and the
     fit's report."""
-    path = cache_dir() / f"{key or _cache_key(robot)}.json"
+    key = key or _cache_key(robot)
+    path = cache_dir() / f"{key}.json"
     if path.is_file():
         try:
             raw = json.loads(path.read_text())
@@ -324,6 +326,9 @@ def robot_spheres(
             return spheres, dict(raw.get("report", {}))
         except (OSError, ValueError, KeyError, TypeError):
             pass  # a broken cache file: fit again
+    shipped = read_shipped(key)
+    if shipped is not None:
+        return shipped
     spheres, report = fit_robot(robot.model, robot.collision_model(), rule)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -347,6 +352,43 @@ def robot_spheres(
     except OSError:
         pass  # a read-only home: fit again next time
     return spheres, report
+
+
+def shipped_dir() -> Path:
+    """Folder ``data/proxies`` of posturegen: the bundled robots' proxies, fitted before
+    release (``tools/ship_proxies.py``), one ``<key>.npz`` per robot (:func:`_cache_key`: a
+    robot whose meshes, URDF or fitting code differ finds none and is fitted)."""
+    return Path(str(importlib.resources.files("posturegen") / "data" / "proxies"))
+
+
+def read_shipped(key: str) -> tuple[list[Sphere], dict[str, Any]] | None:
+    """The shipped proxies fitted under ``key`` and their fit's report, None if none are."""
+    path = shipped_dir() / f"{key}.npz"
+    if not path.is_file():
+        return None
+    with np.load(path, allow_pickle=False) as z:
+        joint, center, radius, excess = z["joint"], z["center"], z["radius"], z["excess"]
+        report = json.loads(str(z["report"]))
+    spheres = [
+        Sphere(int(j), np.array(c, dtype=float), float(r), float(e))
+        for j, c, r, e in zip(joint, center, radius, excess, strict=True)
+    ]
+    return spheres, report
+
+
+def write_shipped(key: str, spheres: list[Sphere], report: dict[str, Any]) -> Path:
+    """Write proxies to the package's ``data/proxies/<key>.npz`` (see :func:`shipped_dir`)."""
+    path = shipped_dir() / f"{key}.npz"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(
+        path,
+        joint=np.array([s.joint_id for s in spheres], dtype=np.int32),  # (n,)
+        center=np.array([s.center for s in spheres], dtype=float).reshape(-1, 3),  # (n, 3) [m]
+        radius=np.array([s.radius for s in spheres], dtype=float),  # (n,) [m]
+        excess=np.array([s.excess for s in spheres], dtype=float),  # (n,) [m]
+        report=np.array(json.dumps(report)),
+    )
+    return path
 
 
 def proxy_model(robot: Robot) -> ProxyModel:
