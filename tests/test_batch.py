@@ -24,7 +24,7 @@ from posturegen.batch.report import Summary, category, percentile
 from posturegen.batch.schedule import chunks, run_jobs
 from posturegen.batch.sources import read_sources
 from posturegen.batch.worker import solve_job
-from posturegen.bench import talos_stand_reach
+from posturegen.bench.families import talos_stand_reach
 from posturegen.cli import main
 from tests.batch_problems import FAR, killer, stand
 from tests.conftest import HRP2_URDF

@@ -13,7 +13,7 @@ import yaml
 
 import posturegen as pg
 from posturegen.batch import run_batch
-from posturegen.bench import talos_stand_reach
+from posturegen.bench.families import talos_stand_reach
 from posturegen.cli import main
 from tests.batch_problems import FAR, killer, stand
 

@@ -6,7 +6,7 @@ import dataclasses
 
 import pytest
 
-from posturegen.bench import FAMILIES, FamilyReport, comparison_lines
+from posturegen.bench.families import FAMILIES, FamilyReport, comparison_lines
 from posturegen.cli import main
 
 
@@ -72,7 +72,7 @@ def test_compared_families_are_the_same_problems(pair):
 
 def test_compared_families_run_interleaved(monkeypatch):
     """Blocks of the baseline and of the variant in turn; other families alone."""
-    from posturegen import bench
+    from posturegen.bench import families as bench
 
     order = []
     step = bench._FamilyRun.step

@@ -10,9 +10,9 @@ import json
 import numpy as np
 import pinocchio as pin
 
-from posturegen.bench_cold import ColdReport, PeerReport, cold_table, run_cold
-from posturegen.bench_peer import export_problem, write_problems
-from posturegen.bench_reach import PLANNER_FAMILIES
+from posturegen.bench.cold import ColdReport, PeerReport, cold_table, run_cold
+from posturegen.bench.peer import export_problem, write_problems
+from posturegen.bench.reach import PLANNER_FAMILIES
 from posturegen.solver.solve import solve
 
 

@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from posturegen.bench_planner import PassStats, PlannerReport
-from posturegen.bench_reach import (
+from posturegen.bench.planner import PassStats, PlannerReport
+from posturegen.bench.reach import (
     MARGIN,
     MU,
     PLANNER_FAMILIES,
@@ -18,7 +18,7 @@ from posturegen.bench_reach import (
     _ReachSampler,
     varied_stance,
 )
-from posturegen.bench_table import HEADER, results_table, write_markdown
+from posturegen.bench.table import HEADER, results_table, write_markdown
 from posturegen.cli import main
 from posturegen.errors import InputError
 
@@ -67,7 +67,7 @@ def test_varied_stances_are_in_their_ranges(seed):
 
 def test_the_stances_family_draws_no_stance_whose_feet_intersect():
     """Seed 0 meets two such stances in its first 150 (narrow, toes turned in): drawn again."""
-    from posturegen.bench_reach import stances_family
+    from posturegen.bench.reach import stances_family
     from posturegen.collision.active_set import placed_blocked
 
     assert all(placed_blocked(p) is None for p in stances_family(150, 0))

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from posturegen import plan
 from posturegen.cli import main
 from posturegen.errors import InputError
-from posturegen.geometry import ConvexPolygon
+from posturegen.model.geometry import ConvexPolygon
 from posturegen.model.robot import load_bundled
 from posturegen.model.scene import Surface
 from posturegen.planner import Budget, Goal, default_rules, parse_goal, parse_rules

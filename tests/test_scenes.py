@@ -254,7 +254,7 @@ def test_climb_verifies_every_stage(
 
 def test_the_inclined_ladder_climbs_one_step(tmp_path: Path) -> None:
     """`climb ladder-inclined` runs the demo's stages; more steps is a one-line error."""
-    from posturegen.scenes import scene
+    from posturegen.climb.scenes import scene
 
     assert [s["name"] for s in scene("ladder-inclined", "hrp2", 1)["stages"]][-1] == (
         "left foot on step 2"

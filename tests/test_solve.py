@@ -366,7 +366,7 @@ def test_a_run_uses_only_what_is_left_of_the_call_budget():
     BUDGET_STEP - 1, where a run allowed its whole max_iter (200) would not."""
     import dataclasses
 
-    from posturegen.bench_reach import stances_family
+    from posturegen.bench.reach import stances_family
     from posturegen.solver.runs import BUDGET_STEP
 
     problem = list(stances_family(29, 0))[28]

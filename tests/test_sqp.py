@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from posturegen import solve
-from posturegen.bench_reach import reach_balance_family
+from posturegen.bench.reach import reach_balance_family
 from posturegen.cli import _solvers
 from posturegen.errors import InputError, PosturegenError
 from posturegen.solver import runs as runs_module
@@ -208,8 +208,8 @@ def test_row_order_does_not_decide_a_shipped_climb(monkeypatch, tmp_path):
     postures are not the same in every order: a stage's SQP may end at another local
     solution, up to 4 cm away on this climb; the QP's working sets, and so the path, depend
     on the order where the QPs are degenerate.)"""
+    from posturegen.climb.scenes import scene
     from posturegen.climb.sequence import run_sequence
-    from posturegen.scenes import scene
     from posturegen.verify import verify_file
 
     monkeypatch.setenv("POSTUREGEN_SOLVER", "auto")

@@ -7,7 +7,7 @@ import pinocchio as pin
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from posturegen.bench_reach import MARGIN, _problem
+from posturegen.bench.reach import MARGIN, _problem
 from posturegen.collision.active_set import ActiveSet, placed_pairs
 from posturegen.collision.proxies import proxy_model
 from posturegen.collision.stance_hold import (
@@ -86,7 +86,7 @@ def test_caps_within_their_reach_hold_as_caps_of_every_pair(feet):
 
 
 def test_holds_are_the_reference_rule_at_the_reference_stance_and_only_lower_elsewhere():
-    from posturegen.bench_reach import _ReachSampler
+    from posturegen.bench.reach import _ReachSampler
 
     sampler = _ReachSampler()
     home = _problem((*sampler.feet, *sampler.yaws), [0.3, -0.3, 0.9], True)

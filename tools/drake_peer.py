@@ -5,7 +5,7 @@ Usage: ``drake_peer.py PROBLEMS.jsonl --out RESULTS.jsonl [--solvers ipopt,snopt
 [--time-limit S]``; run through ``tools/drake_peer.sh``, which keeps Drake in its own virtual
 environment (Drake is no dependency of posturegen; this script needs only drake and numpy).
 
-The problems are written by ``posturegen.bench_peer`` (one JSON object a line). Each is built
+The problems are written by ``posturegen.bench.peer`` (one JSON object a line). Each is built
 as one MathematicalProgram in the decision variables q (the plant's positions: the floating
 base's quaternion wxyz and position, then the joints, mapped to posturegen's by name) and λ_i
 (one world force f_i = W·λ_i on the robot a contact point, W = m·|g| the robot's weight), from

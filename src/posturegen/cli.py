@@ -24,14 +24,14 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import TypeVar
 
-from .batch.bench import DEFAULT_FAMILY, ScalingRow, batch_scaling, machine_line, table
 from .batch.command import batch_to_dir
 from .batch.sources import read_sources
-from .bench import FAMILIES, FamilyReport, comparison_lines, run_families
-from .bench_cold import COLD_FAMILIES, COLD_SEED, cold_table, run_cold, run_peer
-from .bench_planner import PlannerReport, run_planner_family
-from .bench_reach import PLANNER_FAMILIES
-from .bench_table import results_table, write_markdown
+from .bench.cold import COLD_FAMILIES, COLD_SEED, cold_table, run_cold, run_peer
+from .bench.families import FAMILIES, FamilyReport, comparison_lines, run_families
+from .bench.planner import PlannerReport, run_planner_family
+from .bench.reach import PLANNER_FAMILIES
+from .bench.scaling import DEFAULT_FAMILY, ScalingRow, batch_scaling, machine_line, table
+from .bench.table import results_table, write_markdown
 from .climb.scenes import SCENES, scene
 from .climb.sequence import StageReport, run_sequence
 from .errors import PosturegenError, PosturegenWarning

@@ -1,7 +1,7 @@
 """Whole calls as a planner meets them (issue 17): ``posturegen.solve(problem)`` timed from
 the first call of a fresh process whose disk caches are warm, then in the steady state.
 
-A family (:data:`posturegen.bench_reach.PLANNER_FAMILIES`) runs in two child processes
+A family (:data:`posturegen.bench.reach.PLANNER_FAMILIES`) runs in two child processes
 started afresh (``spawn``): the first solves the 2n problems untimed, so that the fitted
 proxies and every compiled library the problems meet are on disk; the second, a fresh
 interpreter, times every call: the *first pass* (problems 0..n-1, the first call included:
@@ -23,9 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from .bench_reach import PLANNER_FAMILIES
-from .solver.solve import solve
-from .solver.starts import NearestStarts
+from ..solver.solve import solve
+from ..solver.starts import NearestStarts
+from .reach import PLANNER_FAMILIES
 
 
 @dataclass(frozen=True)

@@ -18,11 +18,11 @@ import numpy as np
 import pinocchio as pin
 from shapely.geometry import MultiPoint, Point
 
-from .bench import _RIGHT_REACH
-from .collision.active_set import ActiveSet, placed_blocked
-from .io.problem_file import problem_from_dict
-from .model.robot import Robot, load_bundled
-from .solver.problem import Problem
+from ..collision.active_set import ActiveSet, placed_blocked
+from ..io.problem_file import problem_from_dict
+from ..model.robot import Robot, load_bundled
+from ..solver.problem import Problem
+from .families import _RIGHT_REACH
 
 MARGIN = 0.005  # [m] self-collision margin of these families
 MU = 0.5

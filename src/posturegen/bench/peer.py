@@ -15,9 +15,9 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .collision.active_set import ActiveSet
-from .solver.problem import Problem
-from .terms.contacts import FixedContact
+from ..collision.active_set import ActiveSet
+from ..solver.problem import Problem
+from ..terms.contacts import FixedContact
 
 
 def _link(model: pin.Model, joint: int) -> str:

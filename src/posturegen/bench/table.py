@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .bench import FamilyReport
-from .bench_planner import PlannerReport
-from .errors import InputError
+from ..errors import InputError
+from .families import FamilyReport
+from .planner import PlannerReport
 
 HEADER = (
     "family",

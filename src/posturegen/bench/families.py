@@ -20,12 +20,12 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .io.problem_file import problem_from_dict
-from .model.robot import load_bundled
-from .solver import codegen
-from .solver.compile import symbolic
-from .solver.problem import Problem, Program
-from .solver.solve import solve
+from ..io.problem_file import problem_from_dict
+from ..model.robot import load_bundled
+from ..solver import codegen
+from ..solver.compile import symbolic
+from ..solver.problem import Problem, Program
+from ..solver.solve import solve
 
 
 @dataclass(frozen=True)

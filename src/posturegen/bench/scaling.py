@@ -26,14 +26,14 @@ from dataclasses import dataclass
 from datetime import date
 from pathlib import Path
 
-from ..bench import FAMILIES
+from ..batch.backends import open_backend
+from ..batch.jobs import BatchItem, Job, make_jobs
+from ..batch.report import percentile
+from ..batch.schedule import run_jobs
+from ..batch.worker import WorkerInfo, solve_job, worker_info
 from ..errors import InputError
 from ..solver.solve import Result
-from .backends import open_backend
-from .jobs import BatchItem, Job, make_jobs
-from .report import percentile
-from .schedule import run_jobs
-from .worker import WorkerInfo, solve_job, worker_info
+from .families import FAMILIES
 
 DEFAULT_FAMILY = "talos-stand-reach"
 

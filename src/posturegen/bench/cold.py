@@ -7,7 +7,7 @@ that no other pass uses (COLD_SEED + the bench's seed). Every call of ``postureg
 timed from the process's first, in the default code-generation mode (what a user meets): the
 first call pays the robot's program for the contact structure (its declaration and, with a C
 compiler, its compilation), the later ones nothing but their solve. The same problems are
-written for a peer solver (:mod:`posturegen.bench_peer`, ``tools/drake_peer.sh``), so that
+written for a peer solver (:mod:`posturegen.bench.peer`, ``tools/drake_peer.sh``), so that
 "x times Drake" is measured on them.
 """
 
@@ -28,11 +28,11 @@ from typing import Any
 
 import numpy as np
 
-from .bench import FAMILIES
-from .bench_peer import export_problem, write_problems
-from .bench_reach import PLANNER_FAMILIES
-from .solver import compile as compile_module
-from .solver.solve import solve
+from ..solver import compile as compile_module
+from ..solver.solve import solve
+from .families import FAMILIES
+from .peer import export_problem, write_problems
+from .reach import PLANNER_FAMILIES
 
 # the never-seen pass draws its problems with this seed plus the bench's: no other pass of
 # `posturegen bench` uses it, so nothing it meets was compiled by them
