@@ -26,6 +26,9 @@ from .planner import PlanReport, plan
 from .solver.diagnose import diagnose
 from .solver.problem import Problem, SolverOptions
 from .solver.solve import Result, solve
+from .terms import contacts, costs, tasks
+from .terms.nlp import Term
+from .terms.tasks import Task, register_task
 from .verify import VerifyReport, verify_posture
 
 __all__ = [
@@ -45,14 +48,20 @@ __all__ = [
     "SolveError",
     "SolverOptions",
     "Surface",
+    "Task",
+    "Term",
     "VerifyReport",
     "clear_caches",
+    "contacts",
+    "costs",
     "diagnose",
     "load_problem",
     "load_robot",
     "problem_from_dict",
+    "register_task",
     "solve",
     "solve_many",
+    "tasks",
     "verify_posture",
 ]
 __version__ = "0.1.0"

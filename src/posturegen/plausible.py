@@ -77,12 +77,14 @@ def chain_length(model: pin.Model, joint_a: int, joint_b: int) -> float:
     return length
 
 
-def check_target(robot: Any, task: Any, contacts: Iterable[Any], field: str) -> None:
+def check_target(
+    robot: Any, frame_name: str, target: Any, contacts: Iterable[Any], field: str
+) -> None:
     """Warn when a task's target (3,) [m] is farther from one of the contacts than the task's
     frame can be from that contact's patch (:func:`chain_length`): it cannot be reached."""
     model = robot.model
-    frame = model.frames[task.frame_id]
-    target = np.asarray(task.target, dtype=float)
+    frame = model.frames[model.getFrameId(frame_name)]
+    target = np.asarray(target, dtype=float)
     worst: tuple[float, float, str] | None = None
     for c in contacts:
         patch = c.patch
@@ -103,7 +105,7 @@ def check_target(robot: Any, task: Any, contacts: Iterable[Any], field: str) -> 
     warn(
         field,
         f"{np.round(target, 4).tolist()} is {distance:.4g} m from contact '{name}', farther "
-        f"than {task.frame} reaches from it ({reach:.2g} m at most)",
+        f"than {frame_name} reaches from it ({reach:.2g} m at most)",
         fix,
     )
 

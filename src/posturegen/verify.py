@@ -26,10 +26,11 @@ import pinocchio as pin
 from ._cache import BoundedCache
 from .checks import Check, VerifyReport
 from .collision.mesh_check import mesh_collision_checks
-from .errors import InputError
+from .errors import InputError, PosturegenError
 from .io.posture_file import load_posture, model_of_posture
 from .model.geometry import ConvexPolygon, Ellipse, intersect
 from .model.kinematics import scratch_data
+from .terms.tasks import NumericFrames, read_task
 
 # Tolerances of the re-check. Lengths [m], angles [rad], forces relative to the weight.
 TOL_JOINT = 1e-6  # [rad] or [m]
@@ -118,7 +119,7 @@ def verify_posture(
     checks.append(
         Check("static equilibrium", float(np.abs(residual / scale).max()), TOL_EQUILIBRIUM)
     )
-    checks.append(_tasks(posture, model, data))
+    checks.append(_tasks(posture, model, data, q))
     notes: list[str] = []
     if posture.get("collision") is not None:
         if geometry is None:
@@ -281,18 +282,23 @@ def _ellipse_shortfall(ell: dict[str, Any]) -> float:
     return max(small, area_short / max(radii[0], 1e-9))
 
 
-def _tasks(posture: dict[str, Any], model: pin.Model, data: pin.Data) -> Check:
-    """[m] and [rad] the worst hard task error (position, and log3 of the rotation error)."""
-    task_err = 0.0
-    for task in posture.get("tasks", []):
-        if task.get("weight") is not None:
-            continue
-        M = data.oMf[model.getFrameId(task["frame"])]
-        task_err = max(task_err, float(np.abs(M.translation - np.asarray(task["target"])).max()))
-        if task.get("rotation") is not None:
-            err = pin.log3(np.asarray(task["rotation"], dtype=float).T @ M.rotation)
-            task_err = max(task_err, float(np.abs(err).max()))
-    return Check("tasks", task_err, TOL_TASK)
+def _tasks(posture: dict[str, Any], model: pin.Model, data: pin.Data, q: np.ndarray) -> Check:
+    """The worst hard task's error beyond its range [m], [rad] or sines (each task's own
+    :meth:`posturegen.terms.tasks.Task.violation` on Pinocchio's kinematics of q)."""
+    frames = NumericFrames(model, data, q)
+    worst, detail = 0.0, ""
+    for i, entry in enumerate(posture.get("tasks") or []):
+        try:
+            task = read_task(entry, f"tasks[{i}]", i)
+            if task.weight is not None:
+                continue
+            violation = task.violation(frames)
+        except (PosturegenError, KeyError) as exc:
+            return Check("tasks", np.inf, TOL_TASK, f"task {i} cannot be checked: {exc}")
+        for block, value in violation.items():
+            if not value <= worst:
+                worst, detail = value, f"task {i} ({task.kind} {task.subject()}): {block}"
+    return Check("tasks", worst, TOL_TASK, detail)
 
 
 def _gravity(posture: dict[str, Any], model: pin.Model) -> np.ndarray | None:

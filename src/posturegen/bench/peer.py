@@ -16,6 +16,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..collision.active_set import ActiveSet
+from ..errors import InputError
 from ..solver.problem import Problem
 from ..terms.contacts import FixedContact
 
@@ -90,7 +91,9 @@ def export_problem(problem: Problem, family: str = "", index: int = 0) -> dict[s
     robot, model = problem.robot, problem.robot.model
     tasks = []
     for t in problem.tasks:
-        frame = model.frames[t.frame_id]
+        if t.kind != "position" or t.rpy is not None or t.weight is not None:
+            raise InputError("tasks", f"{t.kind} task: the peer exports hard positions only", "")
+        frame = model.frames[model.getFrameId(t.frame)]
         tasks.append(
             {
                 "link": _link(model, int(frame.parentJoint)),

@@ -1,4 +1,4 @@
-"""Problem files (YAML, see README "Problem file") -> :class:`~posturegen.solver.problem.Problem`.
+"""Problem files (YAML, see docs/problem-file.md) -> :class:`~posturegen.solver.problem.Problem`.
 
 Every mistake raises one :class:`~posturegen.errors.InputError` naming the field and the fix.
 """
@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 
 from .. import _fields as F
 from .._fields import read_yaml  # the problem file's reader (public here)
@@ -34,7 +33,7 @@ from ..terms.cop import DEFAULT_COP_MARGIN
 from ..terms.costs import ForceCost, PostureCost, TorqueCost
 from ..terms.ellipse_options import EllipseOptions
 from ..terms.friction import FRICTION_KINDS, FrictionModel
-from ..terms.tasks import PositionTask
+from ..terms.tasks import Task, read_task
 from .placement import place_on_fixed_contacts
 
 CONTACT_TYPES = ("fixed", "geometric", "support", "inclusive", "point")
@@ -248,30 +247,18 @@ _BUILDERS = {
 }
 
 
-def _task(t: Any, i: int, robot: Robot) -> PositionTask:
-    fld = f"tasks[{i}]"
-    t = F.require_mapping(t, fld)
-    F.check_keys(t, fld, ["type", "frame", "target"], ["rpy", "weight"])
-    if t["type"] != "position":
-        raise InputError(
-            f"{fld}.type",
-            f"unknown task type {t['type']!r}",
-            with_hint(str(t["type"]), ["position"], "use position"),
-        )
-    frame = F.string(t["frame"], f"{fld}.frame")
-    fid = robot.frame_id(frame, f"{fld}.frame")
-    target = F.vector(t["target"], 3, f"{fld}.target")
-    R = None
-    if t.get("rpy") is not None:
-        rpy = F.vector(t["rpy"], 3, f"{fld}.rpy")
-        check_angles(rpy, f"{fld}.rpy")
-        R = pin.rpy.rpyToMatrix(*rpy)
-    weight = (
-        F.number(t["weight"], f"{fld}.weight", positive=True)
-        if t.get("weight") is not None
-        else None
-    )
-    return PositionTask(frame, fid, target, R, weight, index=i)
+def _tasks(value: Any, robot: Robot, contacts: list[Any]) -> list[Task]:
+    """The tasks of the ``tasks`` list (each by its registered type), their frames and
+    joints on the robot; a target out of reach of the contacts is a warning."""
+    if not isinstance(value, list):
+        raise InputError("tasks", "expected a list", "write tasks: [{type: position, ...}]")
+    tasks = [read_task(t, f"tasks[{i}]", i) for i, t in enumerate(value)]
+    for i, t in enumerate(tasks):
+        t.check_robot(robot, f"tasks[{i}]")
+        frame, point = getattr(t, "frame", None), t.target_point()
+        if isinstance(frame, str) and point is not None:  # a warning at most
+            check_target(robot, frame, point, contacts, f"tasks[{i}].target")
+    return tasks
 
 
 def _costs(value: Any) -> list[Term]:
@@ -342,12 +329,7 @@ def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
     contacts = [
         _contact(c, i, robot, scene, mu, friction, names, cop) for i, c in enumerate(contacts_raw)
     ]
-    tasks_raw = data.get("tasks", []) or []
-    if not isinstance(tasks_raw, list):
-        raise InputError("tasks", "expected a list", "write tasks: [{type: position, ...}]")
-    tasks: list[Term] = [_task(t, i, robot) for i, t in enumerate(tasks_raw)]
-    for i, t in enumerate(tasks):
-        check_target(robot, t, contacts, f"tasks[{i}].target")  # a warning at most
+    tasks = _tasks(data.get("tasks", []) or [], robot, contacts)
     options = F.require_mapping(data.get("options", {}) or {}, "options")
     F.check_keys(
         options,

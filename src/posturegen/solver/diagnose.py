@@ -23,6 +23,7 @@ import pinocchio as pin
 from ..collision.active_set import box_label
 from ..model.kinematics import scratch_data
 from ..terms.elastic import Elastic, slack_values
+from ..terms.tasks import Task
 from .problem import Program
 from .runs import _IPOPT_OK, run_nlp
 from .solve import (
@@ -299,30 +300,58 @@ def _penalty(r: Relaxed, block: str, slack: np.ndarray) -> float:
 
 
 def _task_causes(r: Relaxed) -> Iterator[Cause]:
-    base = r.problem.q_init[0:3]
     for t in r.problem.tasks:
-        s = r.slacks.get(f"{t.name}.position")
-        if s is not None and np.linalg.norm(s) > TOL_LENGTH:
-            gap = float(np.linalg.norm(s))
-            text = f"target of task {t.index} is {_length(gap)} m beyond reach of {t.frame}"
-            far = float(np.linalg.norm(np.asarray(t.target) - base))
-            if far > MILLIMETRE_DISTANCE and far / 1000 < MILLIMETRE_DISTANCE / 4:
-                text += f" (it is {_length(far)} m from the robot: millimetres? targets are in m)"
-            box = _obstacle_at(r.problem.scene.obstacles, t.target)
-            if box is not None:
-                text = (
-                    f"target of task {t.index} is inside obstacle '{box}' ({t.frame} stays "
-                    f"{_length(gap)} m from it)"
-                )
-            yield Cause("task", f"task {t.index}", gap, "m", text, _penalty(r, t.name, s))
-        rot = [r.slacks.get(f"{t.name}.{k}") for k in ("orientation", "orientation_branch")]
-        rot = [v for v in rot if v is not None]
+        slacks = {
+            k[len(t.name) + 1 :]: v for k, v in r.slacks.items() if k.startswith(f"{t.name}.")
+        }
+        position = slacks.pop("position", None)
+        if position is not None and np.linalg.norm(position) > TOL_LENGTH:
+            gap = float(np.linalg.norm(position))
+            pen = _penalty(r, t.name, position)
+            yield Cause("task", f"task {t.index}", gap, "m", _reach_text(r, t, gap), pen)
+        rot = [slacks.pop(k) for k in ("orientation", "orientation_branch") if k in slacks]
         if rot and max(np.abs(v).max() for v in rot) > TOL_SINE:
-            R = r.outputs[f"{t.name}.rotation"].reshape(3, 3, order="F")
-            angle = np.degrees(np.linalg.norm(pin.log3(np.asarray(t.R_target).T @ R)))
-            text = f"orientation of task {t.index} is {angle:.3g}° beyond reach of {t.frame}"
-            pen = sum(_penalty(r, t.name, v) for v in rot)
-            yield Cause("task", f"task {t.index}", float(angle), "deg", text, pen)
+            yield _orientation_cause(r, t, rot)
+        for block, v in slacks.items():
+            amount = float(np.abs(v).max())
+            if amount > TOL_SINE:
+                text = t.blocked(block, amount)
+                yield Cause("task", f"task {t.index}", amount, t.unit, text, _penalty(r, t.name, v))
+
+
+def _reach_text(r: Relaxed, t: Task, gap: float) -> str:
+    """A task's position block relaxed by ``gap`` [m]: its target beyond reach, inside an
+    obstacle, or given in millimetres."""
+    text = f"target of task {t.index} is {_length(gap)} m beyond reach of {t.subject()}"
+    target = t.target_point()
+    if target is None:
+        return text
+    far = float(np.linalg.norm(target - r.problem.q_init[0:3]))
+    if far > MILLIMETRE_DISTANCE and far / 1000 < MILLIMETRE_DISTANCE / 4:
+        text += f" (it is {_length(far)} m from the robot: millimetres? targets are in m)"
+    box = _obstacle_at(r.problem.scene.obstacles, target)
+    if box is not None:
+        text = (
+            f"target of task {t.index} is inside obstacle '{box}' ({t.subject()} stays "
+            f"{_length(gap)} m from it)"
+        )
+    return text
+
+
+def _orientation_cause(r: Relaxed, t: Task, rot: list[np.ndarray]) -> Cause:
+    """A task's orientation rows relaxed: the angle [deg] it stays from its target."""
+    pen = sum(_penalty(r, t.name, v) for v in rot)
+    R_target = getattr(t, "R_target", None)
+    rotation = r.outputs.get(f"{t.name}.rotation")
+    if R_target is None or rotation is None:
+        amount = float(max(np.abs(v).max() for v in rot))
+        return Cause(
+            "task", f"task {t.index}", amount, t.unit, t.blocked("orientation", amount), pen
+        )
+    R = rotation.reshape(3, 3, order="F")
+    angle = np.degrees(np.linalg.norm(pin.log3(np.asarray(R_target).T @ R)))
+    text = f"orientation of task {t.index} is {angle:.3g}° beyond reach of {t.subject()}"
+    return Cause("task", f"task {t.index}", float(angle), "deg", text, pen)
 
 
 def _obstacle_at(boxes: Any, point: Any) -> str | None:
@@ -460,7 +489,11 @@ def _collision_causes(r: Relaxed) -> Iterator[Cause]:
         who += f" (and {more} more link{'s' if more > 1 else ''})" if more > 0 else ""
         pen = _penalty(r, "collision.env", s[rows])
         cause = _collision_cause(who, box_label(box), float(s[rows[0]]), term.margin, pen)
-        inside = [t.index for t in r.problem.tasks if _obstacle_at([box], t.target) is not None]
+        inside = [
+            t.index
+            for t in r.problem.tasks
+            if t.target_point() is not None and _obstacle_at([box], t.target_point()) is not None
+        ]
         if inside and box.name in {o.name for o in r.problem.scene.obstacles}:
             cause = replace(cause, text=cause.text + f" (task {inside[0]}'s target is inside it)")
         yield cause

@@ -27,6 +27,7 @@ from ..terms.contacts import Contact
 from ..terms.elastic import Elastic
 from ..terms.equilibrium import StaticEquilibrium
 from ..terms.nlp import Term
+from ..terms.tasks import Task
 from . import codegen
 from .compile import CompiledNLP, compile_program, constraint_counts, numeric, summary
 from .qp import registry as qp_registry
@@ -40,7 +41,7 @@ from .qp import registry as qp_registry
 METHODS = ("auto", "sqp", "ipopt")
 # IPOPT: where the SQP fails, "auto" pays both solvers (warm, 2026-12-04: Talos' 4-step stairs
 # plan 20.7 s against 13.3 s with IPOPT alone, HRP-2's vertical ladder 27.8 against 17.6 s);
-# on the never-seen families auto's median call is as fast or faster (README)
+# on the never-seen families auto's median call is as fast or faster (docs/benchmarks.md)
 DEFAULT_METHOD = "ipopt"
 
 MUMPS_SCALING = {"ipopt.mumps_scaling": 0, "ipopt.mumps_permuting_scaling": 0}
@@ -188,6 +189,17 @@ class Problem:
     # hard rows relaxed by L1-penalized slacks (posturegen.terms.elastic; the diagnosis of a
     # failure solves a copy of the problem with it); None: the real program
     elastic: Elastic | None = None
+
+    def __post_init__(self) -> None:
+        """Tasks built in Python are numbered by their place (their names and blocks, and
+        their errors' field names, read ``tasks[i]``) and their frames and joints checked."""
+        tasks = list(self.tasks)
+        for i, t in enumerate(tasks):
+            if isinstance(t, Task) and t.index != i:
+                tasks[i] = dataclasses.replace(t, index=i)
+            if isinstance(t, Task):
+                t.check_robot(self.robot, f"tasks[{i}]")
+        self.tasks = tasks
 
     def terms(self) -> list[Term]:
         """Every term in declaration order (without collision rows: a solve adds them)."""
