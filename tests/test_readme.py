@@ -1,17 +1,20 @@
-"""Every code block of the README runs as written.
+"""Every code block of the README and of the documentation (docs/*.md) runs as written.
 
-The fenced blocks are read from README.md at collection time, so a later edit of the README is
+The fenced blocks are read from the pages at collection time, so a later edit of a page is
 tested without touching this file:
 
-- ``python``: run in order in one namespace (a later snippet uses an earlier one's variables),
-  in a temporary folder that holds the README's problem file as ``problem.yaml``;
+- ``python``: run in order in one namespace per page (a later snippet uses an earlier one's
+  variables), in a temporary folder that holds the page's problem file (its first YAML block
+  with contacts; the README's for a page without one) as ``problem.yaml``;
 - ``yaml``: a problem file (it has ``contacts``) is loaded by ``pg.load_problem`` from that
   ``problem.yaml``; a patch file (it has ``patches``) is loaded as the patches of the shipped
   robot whose URDF has its frames; any other block is a fragment of a problem file, each of
   its keys loaded as a problem file would (``robot``: ``load_robot``, relative paths under
   ``NAME/`` being a copy of the shipped robot NAME's model folder);
 - ``json``: parsed;
-- ``sh``: the two set-up commands, which CI runs itself (``.ci/run``): not run here.
+- ``sh``: the two set-up commands, which CI runs itself (``.ci/run``): not run here;
+- the docs' directives (``{toctree}``, ``{eval-rst}``, ``{literalinclude}``): Sphinx's, built
+  by CI with warnings as errors.
 
 A block of another language fails the test: decide how it is checked.
 """
@@ -31,9 +34,12 @@ import yaml
 import posturegen as pg
 from posturegen.model.robot import BUNDLED, load_bundled, load_robot
 
-README = Path(__file__).resolve().parent.parent / "README.md"
+ROOT = Path(__file__).resolve().parent.parent
+README = ROOT / "README.md"
+PAGES = [README, *sorted((ROOT / "docs").rglob("*.md"))]
 CHECKED = {"python", "yaml", "json"}
-NOT_RUN = {"sh", "text"}  # CI runs the sh ones, as the README says; text: the layout tree
+# CI runs the sh ones, as the README says; text: the layout tree; Sphinx builds the directives
+NOT_RUN = {"sh", "text", "{toctree}", "{eval-rst}", "{literalinclude}"}
 
 
 @dataclass(frozen=True)
@@ -43,17 +49,18 @@ class Block:
     lang: str
     code: str
     line: int
+    page: str = "README.md"
 
     @property
     def id(self) -> str:
-        return f"{self.lang}-line{self.line}"
+        return f"{self.page}:{self.lang}-line{self.line}"
 
 
-def readme_blocks(text: str) -> list[Block]:
+def readme_blocks(text: str, page: str = "README.md") -> list[Block]:
     """The fenced blocks (```lang ... ```) of a Markdown text, in order."""
     blocks, lang, start, lines = [], None, 0, []
     for i, line in enumerate(text.splitlines(), start=1):
-        fence = re.match(r"^```\s*([\w+-]*)\s*$", line)
+        fence = re.match(r"^```\s*([\w+{}-]*)(?:\s.*)?$", line)  # a directive has arguments
         if fence is None:
             if lang is not None:
                 lines.append(line)
@@ -61,26 +68,34 @@ def readme_blocks(text: str) -> list[Block]:
         if lang is None:
             lang, start, lines = fence.group(1) or "(none)", i + 1, []
         else:
-            blocks.append(Block(lang, "\n".join(lines) + "\n", start))
+            blocks.append(Block(lang, "\n".join(lines) + "\n", start, page))
             lang = None
     if lang is not None:
-        raise ValueError(f"README.md: the block opened at line {start - 1} is not closed")
+        raise ValueError(f"{page}: the block opened at line {start - 1} is not closed")
     return blocks
 
 
-BLOCKS = readme_blocks(README.read_text(encoding="utf-8"))
-PYTHON = [b for b in BLOCKS if b.lang == "python"]
+BLOCKS_BY_PAGE = {
+    str(p.relative_to(ROOT)): readme_blocks(p.read_text(encoding="utf-8"), str(p.relative_to(ROOT)))
+    for p in PAGES
+}
+README_BLOCKS = BLOCKS_BY_PAGE["README.md"]
+BLOCKS = [b for blocks in BLOCKS_BY_PAGE.values() for b in blocks]
+PYTHON = [b for b in README_BLOCKS if b.lang == "python"]
 
 
 def _params(lang: str) -> list[Any]:
     return [pytest.param(b, id=b.id) for b in BLOCKS if b.lang == lang]
 
 
-def _problem_block() -> Block:
-    """The README's problem file: the first YAML block with contacts."""
-    for b in BLOCKS:
+def _problem_block(page: str = "README.md") -> Block:
+    """A page's problem file: its first YAML block with contacts (the README's when it has
+    none)."""
+    for b in BLOCKS_BY_PAGE[page]:
         if b.lang == "yaml" and isinstance(d := yaml.safe_load(b.code), dict) and "contacts" in d:
             return b
+    if page != "README.md":
+        return _problem_block()
     raise AssertionError("README.md has no problem file (a yaml block with contacts)")
 
 
@@ -88,23 +103,48 @@ def test_readme_has_the_blocks_it_promises():
     langs = {b.lang for b in BLOCKS}
     assert langs <= CHECKED | NOT_RUN, f"blocks of {langs - CHECKED - NOT_RUN}: check them here"
     assert len(PYTHON) >= 2 and _problem_block() is not None
-    sh = [b for b in BLOCKS if b.lang == "sh"]
+    sh = [b for b in README_BLOCKS if b.lang == "sh"]
     assert len(sh) == 1 and len(sh[0].code.strip().splitlines()) == 2  # the two commands
 
 
+def test_the_readme_is_short_and_links_every_page():
+    """At most about 200 lines; every page of docs/ is linked from the README or from the
+    site's index (its toctrees)."""
+    text = README.read_text(encoding="utf-8")
+    assert len(text.splitlines()) <= 200
+    index = (ROOT / "docs" / "index.md").read_text(encoding="utf-8")
+    tasks = (ROOT / "docs" / "tasks" / "index.md").read_text(encoding="utf-8")
+    for page in sorted((ROOT / "docs").rglob("*.md")):
+        stem = str(page.relative_to(ROOT / "docs").with_suffix(""))
+        if stem in ("index",):
+            continue
+        linked = f"\n{stem}\n" in index or f"\n{Path(stem).name}\n" in tasks
+        assert linked, f"docs/{stem}.md is in no toctree"
+
+
 @pytest.fixture(scope="module")
-def workdir(tmp_path_factory) -> Path:
-    """A folder with the README's problem file as problem.yaml."""
-    d = tmp_path_factory.mktemp("readme")
-    (d / "problem.yaml").write_text(_problem_block().code)
-    return d
+def workdirs(tmp_path_factory) -> dict[str, Path]:
+    """Per page, a folder with its problem file as problem.yaml."""
+    out = {}
+    for page in BLOCKS_BY_PAGE:
+        d = tmp_path_factory.mktemp(page.replace("/", "-"))
+        (d / "problem.yaml").write_text(_problem_block(page).code)
+        out[page] = d
+    return out
+
+
+@pytest.fixture()
+def workdir(workdirs, request) -> Path:
+    block = request.node.callspec.params.get("block")
+    return workdirs[block.page if block is not None else "README.md"]
 
 
 class PythonSession:
-    """The README's Python blocks run in order, once each, in one namespace."""
+    """A page's Python blocks run in order, once each, in one namespace."""
 
-    def __init__(self, cwd: Path) -> None:
+    def __init__(self, cwd: Path, blocks: list[Block]) -> None:
         self.cwd = cwd
+        self.blocks = blocks
         self.namespace: dict[str, Any] = {"__name__": "__readme__"}
         self.outcomes: dict[int, BaseException | None] = {}
 
@@ -112,29 +152,34 @@ class PythonSession:
         """Run blocks 0..k that have not run (in ``cwd``); raise block k's exception."""
         monkeypatch.chdir(self.cwd)
         for i in range(k + 1):
+            block = self.blocks[i]
             if i not in self.outcomes:
                 try:
                     exec(
-                        compile(PYTHON[i].code, f"README.md:{PYTHON[i].line}", "exec"),
+                        compile(block.code, f"{block.page}:{block.line}", "exec"),
                         self.namespace,
                     )
                     self.outcomes[i] = None
                 except Exception as exc:  # noqa: BLE001 (reported by its own test)
                     self.outcomes[i] = exc
             if i < k and self.outcomes[i] is not None:
-                pytest.fail(f"the earlier block at README.md:{PYTHON[i].line} failed")
+                pytest.fail(f"the earlier block at {block.page}:{block.line} failed")
         if (exc := self.outcomes[k]) is not None:
             raise exc
 
 
 @pytest.fixture(scope="module")
-def session(workdir) -> PythonSession:
-    return PythonSession(workdir)
+def sessions(workdirs) -> dict[str, PythonSession]:
+    return {
+        page: PythonSession(workdirs[page], [b for b in blocks if b.lang == "python"])
+        for page, blocks in BLOCKS_BY_PAGE.items()
+    }
 
 
 @pytest.mark.parametrize("block", _params("python"))
-def test_python_block_runs(block, session, monkeypatch):
-    session.run_through(PYTHON.index(block), monkeypatch)
+def test_python_block_runs(block, sessions, monkeypatch):
+    session = sessions[block.page]
+    session.run_through(session.blocks.index(block), monkeypatch)
     if block is PYTHON[0]:  # the first snippet solves the README's problem and writes it
         assert session.namespace["result"].success
         assert (session.cwd / "out" / "posture.json").is_file()
@@ -167,7 +212,8 @@ def test_yaml_block_loads(block, workdir, monkeypatch):
     assert isinstance(data, dict), "a YAML block of the README is a mapping"
     monkeypatch.chdir(workdir)
     if "contacts" in data:  # a problem file
-        problem = pg.load_problem("problem.yaml" if block == _problem_block() else _write(block))
+        own = block == _problem_block(block.page)
+        problem = pg.load_problem("problem.yaml" if own else _write(block))
         assert problem.summary()
     elif "patches" in data:  # a patch file
         frames = {p["frame"] for p in data["patches"].values()}

@@ -37,6 +37,7 @@ from .climb.sequence import StageReport, run_sequence
 from .errors import PosturegenError, PosturegenWarning
 from .hints import with_hint
 from .io.problem_file import load_problem, read_yaml
+from .io.schema import add_parser as add_schema_parser
 from .planner.command import add_parser as add_plan_parser
 from .solver.diagnose import solve_diagnosed
 from .solver.inspection import describe
@@ -478,6 +479,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_png_option(p)
     p.set_defaults(func=cmd_climb)
     add_plan_parser(sub)
+    add_schema_parser(sub)
     _add_bench_parser(sub)
     meshes = {"choices": ["visual", "collision"], "default": "visual", "help": "robot meshes"}
     p = sub.add_parser("render", help="draw a posture file to a PNG (paper-style figure)")

@@ -1,8 +1,8 @@
 """The results of ``posturegen bench`` as Markdown (``--markdown FILE``): one table row per
 family, the machine and the date above it. A FILE holding the markers
 ``<!-- bench:start -->`` and ``<!-- bench:end -->`` (``bench-batch`` for ``--batch``) has
-only the text between them replaced: ``posturegen bench --markdown README.md`` regenerates
-the README's tables in place.
+only the text between them replaced: ``posturegen bench --markdown docs/benchmarks.md``
+regenerates the benchmark tables in place.
 """
 
 from __future__ import annotations

@@ -280,7 +280,7 @@ def _load_patches(model: pin.Model, data: Any, field_name: str) -> dict[str, Pat
 
 
 def read_patch_file(path: Path) -> dict[str, Any]:
-    """Parse a patch YAML file (see README, "Patch files")."""
+    """Parse a patch YAML file (see docs/file-formats.md, "Patch file")."""
     data = F.read_yaml(path, "patch YAML file")
     return dict(F.require_mapping(data, "robot.patches"))
 
