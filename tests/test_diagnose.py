@@ -32,8 +32,8 @@ from posturegen.solver.diagnose import (
 )
 from posturegen.solver.problem import Program
 from posturegen.solver.solve import solve
-from posturegen.terms.contacts import FrictionModel
 from posturegen.terms.elastic import Elastic, category
+from posturegen.terms.friction import FrictionModel
 from posturegen.verify import Check, VerifyReport
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())

@@ -30,6 +30,8 @@ from .errors import InputError, PosturegenError
 from .io.posture_file import load_posture, model_of_posture
 from .model.geometry import ConvexPolygon, Ellipse, intersect
 from .model.kinematics import scratch_data
+from .terms.contacts import contact_types
+from .terms.contacts.base import points_in_plane
 from .terms.tasks import NumericFrames, read_task
 
 # Tolerances of the re-check. Lengths [m], angles [rad], forces relative to the weight.
@@ -43,11 +45,6 @@ TOL_TASK = 1e-6  # [m] and [rad]
 # load: the solver meets the CoP rows to 1e-9 of the weight·margin, so the CoP of a contact
 # that bears almost nothing is defined only that loosely (and matters as little)
 COP_FULL_LOAD = 1e-3
-
-
-def _poly_in_plane(T_world_plane: pin.SE3, points_world: np.ndarray) -> np.ndarray:
-    """World points -> (k, 3) coordinates in a plane's frame (z = height above it)."""
-    return (points_world - T_world_plane.translation) @ T_world_plane.rotation
 
 
 @dataclass
@@ -193,9 +190,13 @@ def _check_contact(
     worst.geometry = max(worst.geometry, _pose_error(contact, T_sc))
     _check_forces(contact, f, model, data, weight, residual, worst)
     worst.cop = max(worst.cop, cop_shortfall(contact, f.T_ws, f.P_s, f.T_wc, f.P_c, weight))
-    inside = _INSIDE.get(contact["type"])
-    if inside is not None:
-        worst.inside = max(worst.inside, inside(contact, f))
+    kind = contact_types().get(contact["type"])
+    if kind is None:
+        worst.inside = np.inf  # a type no registered class re-checks: not verified
+    else:
+        worst.inside = max(
+            worst.inside, kind.recheck_outside(contact, f.T_ws, f.P_s, f.T_wc, f.P_c)
+        )
     ell = contact.get("ellipse")
     if ell is not None:
         worst.inside = max(worst.inside, _ellipse_outside(ell, f.T_ws, f.P_s, f.T_wc, f.P_c))
@@ -206,7 +207,8 @@ def _pose_error(contact: dict[str, Any], T_sc: pin.SE3) -> float:
     """[m] and [rad]: a fixed contact's distance from its given pose, a floating contact's yaw
     beyond its range (0 for the others)."""
     err = 0.0
-    if contact.get("pose") is not None and contact["type"] == "fixed":
+    kind = contact_types().get(contact["type"])
+    if contact.get("pose") is not None and kind is not None and kind.fixed_in_place:
         pos = np.asarray(contact["pose"]["position"], dtype=float)
         yaw = float(contact["pose"]["yaw"])
         err = max(float(np.abs(T_sc.translation[:2] - pos).max()), abs(_wrap(_yaw(T_sc) - yaw)))
@@ -234,8 +236,8 @@ def _check_forces(
     p_w = np.array([force["point"] for force in forces], dtype=float)  # (k, 3) [m]
     f_w = np.array([force["force"] for force in forces], dtype=float)  # (k, 3) [N]
     # the points must lie on both polygons: in the surface plane and inside both
-    p_s = _poly_in_plane(f.T_ws, p_w)
-    p_c = _poly_in_plane(f.T_wc, p_w)
+    p_s = points_in_plane(f.T_ws, p_w)
+    p_c = points_in_plane(f.T_wc, p_w)
     worst.geometry = max(worst.geometry, float(np.abs(p_s[:, 2]).max()))
     worst.inside = max(
         worst.inside,
@@ -253,23 +255,6 @@ def _check_forces(
         J = pin.getJointJacobian(model, data, int(jid), pin.LOCAL_WORLD_ALIGNED)  # (6, nv)
         torque = np.cross(p_w[on] - data.oMi[int(jid)].translation, f_w[on]).sum(axis=0)
         residual += J[:3].T @ f_w[on].sum(axis=0) + J[3:].T @ torque
-
-
-def _inclusive_outside(contact: dict[str, Any], f: _ContactFrames) -> float:
-    """[m] how far the patch's worst vertex is outside the surface (inclusive contact)."""
-    v_c = np.column_stack([f.P_c.vertices, np.zeros(f.P_c.n)])
-    v_w = v_c @ f.T_wc.rotation.T + f.T_wc.translation
-    return float(-f.P_s.distance_inside(_poly_in_plane(f.T_ws, v_w)[:, :2]).min())
-
-
-def _point_outside(contact: dict[str, Any], f: _ContactFrames) -> float:
-    """[m] how far a point contact's point is outside the surface."""
-    p_s = _poly_in_plane(f.T_ws, np.asarray(contact["point"]["world"], dtype=float)[None])
-    return float(-f.P_s.distance_inside(p_s[:, :2])[0])
-
-
-# per contact type: what must lie inside the surface besides the force points
-_INSIDE = {"inclusive": _inclusive_outside, "point": _point_outside}
 
 
 def _ellipse_shortfall(ell: dict[str, Any]) -> float:
@@ -363,10 +348,10 @@ def _ellipse_outside(
     pts = c + np.outer(np.cos(t), a1) + np.outer(np.sin(t), a2)  # (256, 3) world
     out = 0.0
     for T, P in ((T_ws, P_s), (T_wc, P_c)):
-        loc = _poly_in_plane(T, pts)
+        loc = points_in_plane(T, pts)
         out = max(out, float(np.abs(loc[:, 2]).max()), float(-P.distance_inside(loc[:, :2]).min()))
     # an exact margin too (sampled points can miss a tangency): rebuild the ellipse in plane s
-    loc_c = _poly_in_plane(T_ws, c[None])[0]
+    loc_c = points_in_plane(T_ws, c[None])[0]
     u = T_ws.rotation.T @ a1
     v = T_ws.rotation.T @ a2
     r1, r2 = float(np.linalg.norm(u)), float(np.linalg.norm(v))
@@ -393,7 +378,7 @@ def cop_shortfall(
     forces = contact.get("forces") or []
     if margin <= 0.0 or not forces:
         return 0.0
-    points = _poly_in_plane(T_ws, np.array([f["point"] for f in forces], dtype=float))[:, :2]
+    points = points_in_plane(T_ws, np.array([f["point"] for f in forces], dtype=float))[:, :2]
     fn = np.array([f["force"] for f in forces], dtype=float) @ T_ws.rotation[:, 2]  # (k,) [N]
     total = float(fn.sum())
     if total <= 0.0:
@@ -401,12 +386,12 @@ def cop_shortfall(
     cop = fn @ points / total  # (2,)
     ell = contact.get("ellipse")
     if ell is not None:
-        centre = _poly_in_plane(T_ws, np.asarray(ell["center"], dtype=float)[None])[0, :2]
+        centre = points_in_plane(T_ws, np.asarray(ell["center"], dtype=float)[None])[0, :2]
         a1, a2 = ((T_ws.rotation.T @ np.asarray(a, dtype=float))[:2] for a in ell["axes"])
         depth = ellipse_depth(cop, centre, (a1, a2))
     else:
         v_w = np.column_stack([P_c.vertices, np.zeros(P_c.n)]) @ T_wc.rotation.T + T_wc.translation
-        patch_s = _poly_in_plane(T_ws, v_w)[:, :2]  # (n, 2) the patch in the surface plane
+        patch_s = points_in_plane(T_ws, v_w)[:, :2]  # (n, 2) the patch in the surface plane
         depth = min(float(P_s.distance_inside(cop[None])[0]), _ring_depth(patch_s, cop))
         if depth < TOL_GEOMETRY:  # outside or at the border: the intersection itself (or none)
             region = intersect(ConvexPolygon(patch_s), P_s)

@@ -18,7 +18,6 @@ import pinocchio as pin
 from ..collision.active_set import ActiveSet
 from ..errors import InputError
 from ..solver.problem import Problem
-from ..terms.contacts import FixedContact
 
 
 def _link(model: pin.Model, joint: int) -> str:
@@ -39,7 +38,7 @@ def _contacts(problem: Problem) -> list[dict[str, Any]]:
     and its friction."""
     model, out = problem.robot.model, []
     for c in problem.contacts:
-        if not isinstance(c, FixedContact):
+        if not c.fixed_in_place:
             raise ValueError(f"contact '{c.name}': only fixed contacts are exported")
         out.append(
             {

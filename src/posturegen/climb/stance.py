@@ -12,7 +12,7 @@ import pinocchio as pin
 from ..errors import InputError
 from ..solver.problem import Problem
 from ..solver.solve import Result
-from ..terms.contacts import Contact, FixedContact, FloatingContact
+from ..terms.contacts import Contact, FixedContact
 from ..terms.cop import DEFAULT_COP_MARGIN
 from ..terms.friction import FrictionModel
 
@@ -22,11 +22,7 @@ def frozen_pose(contact: Contact, model: pin.Model, q: np.ndarray) -> tuple[np.n
     fixed contact it becomes for the next stance: a fixed contact keeps its own (realized to
     1e-6), a floating one takes its realized pose. The one place a contact is frozen
     (:func:`next_problem`, the ``keep`` contacts of posturegen.climb.sequence)."""
-    if isinstance(contact, FixedContact):
-        return np.asarray(contact.position), float(contact.yaw)
-    if isinstance(contact, FloatingContact):
-        return contact.realized_pose(model, q)
-    raise InputError("fix", f"cannot freeze contact '{contact.name}'", "fix it explicitly")
+    return contact.realized_pose(model, q)
 
 
 def next_problem(
@@ -54,7 +50,7 @@ def next_problem(
     if not result.success:
         raise InputError("result", "the posture was not verified", "fix a contact of a success")
     old = problem.contacts[names.index(fix)]
-    if isinstance(old, FixedContact):
+    if old.fixed_in_place:
         fixed = old  # already fixed: it stays where it is (its realized pose, to 1e-6)
     else:
         position, yaw = frozen_pose(old, problem.robot.model, result.q)

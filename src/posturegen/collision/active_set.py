@@ -19,7 +19,6 @@ import pinocchio as pin
 
 from .._cache import BoundedCache, Ref
 from ..model.kinematics import scratch_data
-from ..terms.contacts import FixedContact
 from .boxes import CollisionOptions, EnvBox, env_boxes, excluded_joint_ids, row_box_distances
 from .mesh_check import placed_intersections
 from .proxies import Close, ProxyModel, closest, proxy_model
@@ -306,7 +305,7 @@ def placed_pairs(problem: Any) -> frozenset[tuple[int, int]]:
     margin (Talos, feet 16 cm apart at yaws 0.045 and 0.109 rad: soles' proxies 1 mm apart,
     meshes apart; 12 of 12 reaches failed after 180-440 iterations). Their meshes are still
     re-checked (posturegen.verify): a stance whose feet intersect fails there."""
-    joints = sorted({c.patch.joint_id for c in problem.contacts if isinstance(c, FixedContact)})
+    joints = sorted({c.patch.joint_id for c in problem.contacts if c.fixed_in_place})
     return frozenset((a, b) for i, a in enumerate(joints) for b in joints[i + 1 :])
 
 
@@ -321,7 +320,7 @@ def placed_blocked(problem: Any) -> str | None:
         return None
     placed: dict[int, pin.SE3] = {}
     for c in problem.contacts:
-        if isinstance(c, FixedContact):
+        if c.fixed_in_place:  # its pose is given: T_world_target
             placed.setdefault(c.patch.joint_id, c.T_world_target * c.patch.T_joint_patch.inverse())
     robot = problem.robot
     srdf = str(robot.srdf) if robot.srdf else None

@@ -108,8 +108,7 @@ def stance_caps(problem: Any, pm: ProxyModel, reach: float = CAP_REACH) -> np.nd
     fixed = [
         c
         for c in problem.contacts
-        if isinstance(c, FixedContact)
-        and len(support_joints(model, [c.patch.joint_id])) - 1 <= DETERMINED
+        if c.fixed_in_place and len(support_joints(model, [c.patch.joint_id])) - 1 <= DETERMINED
     ]
     key = (
         Ref(problem.robot.model),

@@ -15,7 +15,6 @@ import numpy as np
 import pinocchio as pin
 
 from ..model.robot import Robot
-from ..terms.contacts import FixedContact
 
 # [m] the arm of the frame points that carry a patch's orientation into the fit
 _AXIS_LENGTH = 0.1
@@ -46,7 +45,7 @@ def place_on_fixed_contacts(robot: Robot, q: np.ndarray, contacts: Sequence[Any]
     rise from the patch origins to their targets of the contacts stood on (patch normal
     within 30° of straight down), 0 without one. Without a fixed contact, q unchanged."""
     q = np.array(q, dtype=float)
-    fixed = [c for c in contacts if isinstance(c, FixedContact)]
+    fixed = [c for c in contacts if c.fixed_in_place]
     if not fixed:
         return q
     data = robot.model.createData()

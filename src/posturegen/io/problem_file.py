@@ -6,7 +6,6 @@ Every mistake raises one :class:`~posturegen.errors.InputError` naming the field
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -21,22 +20,13 @@ from ..model.robot import Robot, load_robot
 from ..model.scene import Scene
 from ..plausible import check_angles, check_target
 from ..solver.problem import Problem, SolverOptions, Term
-from ..terms.contacts import (
-    Contact,
-    FixedContact,
-    GeometricContact,
-    InclusiveContact,
-    PointContact,
-    SupportContact,
-)
+from ..terms.contacts import Contact, ContactEntry, contact_types
 from ..terms.cop import DEFAULT_COP_MARGIN
 from ..terms.costs import ForceCost, PostureCost, TorqueCost
-from ..terms.ellipse_options import EllipseOptions
 from ..terms.friction import FRICTION_KINDS, FrictionModel
 from ..terms.tasks import Task, read_task
 from .placement import place_on_fixed_contacts
 
-CONTACT_TYPES = ("fixed", "geometric", "support", "inclusive", "point")
 _TOP_REQUIRED = ("robot", "contacts")
 _TOP_OPTIONAL = (
     "mu",
@@ -75,19 +65,6 @@ def _friction(value: Any, field: str) -> FrictionModel:
     return FrictionModel(kind, faces)
 
 
-_ELLIPSE_KEYS = ["formulation", "min_radii", "min_area", "maximize_area", "scaling"]
-_CONTACT_KEYS = {
-    "fixed": ["position", "yaw", "mu", "friction", "cop_margin"],
-    "geometric": [*_ELLIPSE_KEYS, "yaw_range"],
-    "support": [*_ELLIPSE_KEYS, "points", "mu", "friction", "yaw_range", "cop_margin"],
-    "inclusive": ["yaw_range"],
-    "point": ["point", "yaw_range"],
-}
-
-
-_ANY_CONTACT_KEY = sorted({k for keys in _CONTACT_KEYS.values() for k in keys})
-
-
 def _yaw_range(c: dict[str, Any], fld: str) -> tuple[float, float] | None:
     """A floating contact's optional yaw bounds [ψ_min, ψ_max] (rad), less than a turn apart."""
     if c.get("yaw_range") is None:
@@ -104,33 +81,6 @@ def _yaw_range(c: dict[str, Any], fld: str) -> tuple[float, float] | None:
     return lo, hi
 
 
-def _ellipse_options(c: Any, fld: str) -> EllipseOptions:
-    base = EllipseOptions()
-    form = F.string(c.get("formulation", base.formulation), f"{fld}.formulation")
-    if form not in ("paper", "support"):
-        raise InputError(
-            f"{fld}.formulation",
-            f"unknown formulation '{form}'",
-            with_hint(form, ("paper", "support"), "use paper or support"),
-        )
-    radii = base.min_radii
-    if "min_radii" in c:
-        r = F.vector(c["min_radii"], 2, f"{fld}.min_radii")
-        if np.any(r <= 0):
-            raise InputError(f"{fld}.min_radii", "radii must be positive", "write [rx, ry] > 0 (m)")
-        radii = (float(r[0]), float(r[1]))
-    scaling = c.get("scaling", base.scaling)
-    if scaling not in ("auto", "none"):
-        scaling = F.number(scaling, f"{fld}.scaling", positive=True)
-    return EllipseOptions(
-        formulation=form,
-        min_radii=radii,
-        min_area=F.number(c.get("min_area", 0.0), f"{fld}.min_area", minimum=0.0),
-        maximize_area=F.number(c.get("maximize_area", 0.0), f"{fld}.maximize_area", minimum=0.0),
-        scaling=scaling,
-    )
-
-
 def _contact(
     c: Any,
     i: int,
@@ -143,16 +93,19 @@ def _contact(
 ) -> Contact:
     fld = f"contacts[{i}]"
     c = F.require_mapping(c, fld)
+    types = contact_types()
+    any_key = sorted({k for cls in types.values() for k in cls.keys})
     # required first, and misspelt keys of any contact type
-    F.check_keys(c, fld, ["robot_patch", "surface", "type"], ["name", *_ANY_CONTACT_KEY])
+    F.check_keys(c, fld, ["robot_patch", "surface", "type"], ["name", *any_key])
     ctype = F.string(c["type"], f"{fld}.type")
-    if ctype not in CONTACT_TYPES:
+    if ctype not in types:
         raise InputError(
             f"{fld}.type",
             f"unknown contact type '{ctype}'",
-            with_hint(ctype, CONTACT_TYPES, f"use one of: {', '.join(CONTACT_TYPES)}"),
+            with_hint(ctype, types, f"use one of: {', '.join(types)}"),
         )
-    F.check_keys(c, fld, ["robot_patch", "surface", "type"], ["name", *_CONTACT_KEYS[ctype]])
+    cls = types[ctype]
+    F.check_keys(c, fld, ["robot_patch", "surface", "type"], ["name", *cls.keys])
     patch = robot.patch(F.string(c["robot_patch"], f"{fld}.robot_patch"), f"{fld}.robot_patch")
     surface = scene.surface(F.string(c["surface"], f"{fld}.surface"), f"{fld}.surface")
     name = F.string(c.get("name", patch.name), f"{fld}.name")
@@ -165,86 +118,7 @@ def _contact(
     fric = _friction(c["friction"], f"{fld}.friction") if "friction" in c else friction
     yr = _yaw_range(c, fld)
     cop = F.number(c.get("cop_margin", cop_margin), f"{fld}.cop_margin", minimum=0.0)
-    common = _Common(name, patch, surface, mu_c, fric, yr, cop)
-    return _BUILDERS[ctype](c, fld, common)
-
-
-@dataclass(frozen=True)
-class _Common:
-    """What every contact type reads from its entry (validated)."""
-
-    name: str
-    patch: Any
-    surface: Any
-    mu: float
-    friction: FrictionModel
-    yaw_range: tuple[float, float] | None
-    cop_margin: float
-
-
-def _geometric(c: Any, fld: str, k: _Common) -> Contact:
-    ell = _ellipse_options(c, fld)
-    return GeometricContact(k.name, k.patch, k.surface, k.mu, ell, yaw_range=k.yaw_range)
-
-
-def _support(c: Any, fld: str, k: _Common) -> Contact:
-    n = F.integer(c.get("points", 8), f"{fld}.points", 4, "use 8")
-    ell = _ellipse_options(c, fld)
-    return SupportContact(
-        k.name,
-        k.patch,
-        k.surface,
-        k.mu,
-        ell,
-        n,
-        k.friction,
-        yaw_range=k.yaw_range,
-        cop_margin=k.cop_margin,
-    )
-
-
-def _inclusive(c: Any, fld: str, k: _Common) -> Contact:
-    return InclusiveContact(k.name, k.patch, k.surface, k.mu, yaw_range=k.yaw_range)
-
-
-def _point(c: Any, fld: str, k: _Common) -> Contact:
-    point = F.vector(c.get("point", [0.0, 0.0]), 2, f"{fld}.point")
-    if not k.patch.polygon.contains(point[None])[0]:
-        raise InputError(
-            f"{fld}.point",
-            "the point is outside the robot patch",
-            "give a point of the patch polygon, in the patch frame",
-        )
-    return PointContact(k.name, k.patch, k.surface, k.mu, point, yaw_range=k.yaw_range)
-
-
-def _fixed(c: Any, fld: str, k: _Common) -> Contact:
-    if "position" not in c:
-        raise InputError(
-            f"{fld}.position",
-            "missing for a fixed contact",
-            "add position: [x, y] in the surface frame",
-        )
-    pos = F.vector(c["position"], 2, f"{fld}.position")
-    yaw = F.angle(c.get("yaw", 0.0), f"{fld}.yaw")
-    try:
-        return FixedContact(
-            k.name, k.patch, k.surface, pos, yaw, k.mu, k.friction, cop_margin=k.cop_margin
-        )
-    except InputError as exc:
-        raise InputError(
-            f"{fld}.cop_margin" if exc.field == "cop_margin" else fld, exc.problem, exc.fix
-        ) from exc
-
-
-# per contact type: its contact from the entry (CONTACT_TYPES order)
-_BUILDERS = {
-    "fixed": _fixed,
-    "geometric": _geometric,
-    "support": _support,
-    "inclusive": _inclusive,
-    "point": _point,
-}
+    return cls.read(c, fld, ContactEntry(name, patch, surface, mu_c, fric, yr, cop))
 
 
 def _tasks(value: Any, robot: Robot, contacts: list[Any]) -> list[Task]:

@@ -17,8 +17,8 @@ from typing import Any
 import jsonschema
 
 from .._fields import read_yaml
+from ..terms.contacts import contact_types
 from ..terms.tasks import task_types
-from .problem_file import _CONTACT_KEYS, CONTACT_TYPES
 
 SCHEMA_ID = "https://posturegen.dev/schema/problem.json"
 _NUMBER: dict[str, Any] = {"type": "number"}
@@ -120,7 +120,7 @@ _COSTS = {
 
 
 def _contact(kind: str) -> dict[str, Any]:
-    keys = _CONTACT_KEYS[kind]
+    keys = contact_types()[kind].keys
     return {
         "type": "object",
         "title": f"{kind} contact",
@@ -179,7 +179,7 @@ def problem_schema(user_tasks: bool = True) -> dict[str, Any]:
             "contacts": {
                 "type": "array",
                 "minItems": 1,
-                "items": {"oneOf": [_contact(k) for k in CONTACT_TYPES]},
+                "items": {"oneOf": [_contact(k) for k in contact_types()]},
             },
             "tasks": {
                 "type": ["array", "null"],

@@ -396,7 +396,7 @@ def _contact_causes(r: Relaxed) -> Iterator[Cause]:
         if parts:
             amount = max(float(np.abs(v).max()) for v in s.values())
             pen = sum(_penalty(r, f"{pre}.{k}", v) for k, v in s.items())
-            where = ("its pose on " if c.type == "fixed" else "") + f"surface '{c.surface.name}'"
+            where = ("its pose on " if c.fixed_in_place else "") + f"surface '{c.surface.name}'"
             text = f"contact '{c.name}' cannot reach {where} ({', '.join(parts)})"
             yield Cause("contact", c.name, amount, "m", text, pen)
 
