@@ -107,19 +107,10 @@ def test_readme_has_the_blocks_it_promises():
     assert len(sh) == 1 and len(sh[0].code.strip().splitlines()) == 2  # the two commands
 
 
-def test_the_readme_is_short_and_links_every_page():
-    """At most about 200 lines; every page of docs/ is linked from the README or from the
-    site's index (its toctrees)."""
-    text = README.read_text(encoding="utf-8")
-    assert len(text.splitlines()) <= 200
-    index = (ROOT / "docs" / "index.md").read_text(encoding="utf-8")
-    tasks = (ROOT / "docs" / "tasks" / "index.md").read_text(encoding="utf-8")
-    for page in sorted((ROOT / "docs").rglob("*.md")):
-        stem = str(page.relative_to(ROOT / "docs").with_suffix(""))
-        if stem in ("index",):
-            continue
-        linked = f"\n{stem}\n" in index or f"\n{Path(stem).name}\n" in tasks
-        assert linked, f"docs/{stem}.md is in no toctree"
+def test_the_readme_is_short():
+    """At most about 200 lines (the reference is in docs/; Sphinx, run with -W by
+    tests/test_docs_build.py, fails on a page that no toctree links)."""
+    assert len(README.read_text(encoding="utf-8").splitlines()) <= 200
 
 
 @pytest.fixture(scope="module")

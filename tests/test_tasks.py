@@ -268,3 +268,15 @@ def test_a_kind_registered_twice_by_another_class_is_an_error():
             fields: ClassVar[dict[str, Field]] = {"frame": Field("frame", "a frame")}
 
     assert "test_no_frame" not in task_types()
+
+
+def test_a_soft_range_of_zero_and_one_of_another_value_share_a_program_and_both_pull():
+    """Which blocks are ranges is structure, not their values: joints at 0, then at 0.3,
+    soft, reuse one program and each pulls its joint toward its own value."""
+    model = load_bundled("talos").model
+    index = model.joints[model.getJointId("torso_2_joint")].idx_q
+    first = solve(_problem({"values": {"torso_2_joint": 0.0}, "weight": 100.0}, "joints"))
+    second = solve(_problem({"values": {"torso_2_joint": 0.3}, "weight": 100.0}, "joints"))
+    assert first.success and second.success
+    assert abs(first.q[index]) < 0.02 and abs(second.q[index] - 0.3) < 0.02
+    assert second.build_time_s < 0.05  # the program of the first

@@ -86,7 +86,17 @@ def verify_posture(
 ) -> VerifyReport:
     """Check a posture dict (posture-file content) against a Pinocchio model; with a
     ``collision`` entry, also on the real collision meshes (``geometry``, loaded from the
-    posture's URDF when not given)."""
+    posture's URDF when not given).
+
+    Args:
+        posture: a posture file's content (q, torques, contacts with their forces, tasks).
+        model: the robot's Pinocchio model.
+        geometry: its collision model (default: loaded from the posture's URDF).
+
+    Returns:
+        The report: one Check per quantity (joint and torque limits [rad, N·m], contact
+        geometry [m], friction and equilibrium [relative to the weight], tasks, meshes [m]),
+        ``ok`` when every one is within its tolerance."""
     data = scratch_data(model)
     q = np.asarray(posture["q"], dtype=float)
     if q.shape != (model.nq,) or not np.all(np.isfinite(q)):

@@ -54,7 +54,18 @@ def solve_many(
 ) -> list[Result | BatchError]:
     """Solve every problem on ``workers`` processes (default: every core, or the Ray
     cluster's CPUs); the answers in input order. The workers' warnings are raised here, each
-    prefixed with its problem's name; ``progress`` is called with each item as it finishes."""
+    prefixed with its problem's name; ``progress`` is called with each item as it finishes.
+
+    Args:
+        problems: problem files (paths), problem dicts or Problems.
+        workers: processes (default: every core, or the Ray cluster's CPUs).
+        backend: ``local`` or ``ray``; address: the Ray cluster's (default: a local one).
+        diagnose: diagnose each failure (one or two more solves each).
+        progress: called with each BatchItem as it finishes.
+
+    Returns:
+        Per problem, in input order: its Result, or a BatchError (``input error``, ``error``,
+        ``worker crashed``) when it gave none."""
     answers: dict[int, Result | BatchError] = {}
     for item in run_batch(problems, workers, backend, address, diagnose):
         answers[item.index] = item.result

@@ -42,7 +42,13 @@ _TOP_OPTIONAL = (
 
 
 def load_problem(path: str | Path) -> Problem:
-    """Read and validate a problem file."""
+    """Read and validate a problem file.
+
+    Args:
+        path: a YAML (or JSON) problem file.
+
+    Returns:
+        The Problem (:func:`problem_from_dict` of its content, paths relative to its folder)."""
     path = Path(path)
     return problem_from_dict(read_yaml(path), base_dir=path.parent)
 
@@ -188,7 +194,16 @@ def _solver_options(value: Any) -> SolverOptions:
 
 
 def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
-    """Validate a problem-file dict and build the :class:`Problem`."""
+    """Validate a problem-file dict and build the :class:`Problem`.
+
+    Args:
+        data: the problem file's content (robot, surfaces, obstacles, contacts, tasks, costs,
+            options; lengths in m, angles in rad; see docs/problem-file.md).
+        base_dir: the folder that relative paths (a robot's URDF) are relative to.
+
+    Returns:
+        The Problem, checked: bad input raises one :class:`~posturegen.errors.InputError`
+        naming the field and the fix."""
     data = F.require_mapping(data, "problem")
     F.check_keys(data, "problem", _TOP_REQUIRED, _TOP_OPTIONAL)
     robot = load_robot(data["robot"], base_dir)

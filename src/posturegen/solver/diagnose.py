@@ -147,7 +147,15 @@ ELASTIC_MAX_ITER = 300
 def diagnose(problem: Any, result: Result) -> Result:
     """``result`` (a failed solve of ``problem``, a :class:`posturegen.solver.problem.Problem`) with
     its diagnosis: ``Result.diagnosis`` (one line) and the posture file's ``diagnosis``
-    (:meth:`Diagnosis.to_dict`); a success is returned as it is."""
+    (:meth:`Diagnosis.to_dict`); a success is returned as it is.
+
+    Args:
+        problem: the problem that ``result`` failed.
+        result: the failed Result (a success is returned unchanged).
+
+    Returns:
+        The Result with ``diagnosis``: the causes that block it, each with its amount [m, deg,
+        N·m] (one or two more solves, of an elastic copy of the problem)."""
     if result.success:
         return result
     if result.status in _IPOPT_OK:

@@ -149,7 +149,17 @@ def solve(problem: Problem, x0: np.ndarray | None = None, start: Solved | None =
     of the same robot to start from instead (:mod:`posturegen.solver.starts`; a planner's
     nearest solution): without collision avoidance its multipliers too (IPOPT's warm start,
     SolverOptions.warm_start), else its variables, the active-set loop's own barrier
-    parameter then (COLLISION_MU_INIT). The continuations start from its variables."""
+    parameter then (COLLISION_MU_INIT). The continuations start from its variables.
+
+    Args:
+        problem: the posture problem (never written on: it can be solved from threads).
+        x0: (nx,) the program's variables to start from, in this problem's layout.
+        start: a solved Result of the same robot to warm-start from.
+
+    Returns:
+        A frozen :class:`Result`: ``success`` (re-checked on Pinocchio and the meshes), ``q``
+        (nq,) [m, quaternion xyzw, rad], ``torques`` (nj,) [N·m], ``forces`` per contact
+        [N at points in m], ``status``, ``iterations``, timings [s], ``verification``."""
     token = BUDGET.set(Budget(problem.solver_options.max_call_iter))
     try:
         return _solve(problem, x0, start)

@@ -124,10 +124,11 @@ class Task(Term):
                 ctx.nlp.constrain(f"{self.name}.{block}", e, lo, hi)
             return
         cost: Any = 0
+        ranges = self.limits()  # which blocks are ranges is structure, whatever their values
         for block, e in blocks.items():
             lo, hi = limits[block]
             s = scales.get(block, self.scale)
-            if np.all(lo == 0) and np.all(hi == 0):
+            if block not in ranges:
                 cost += ca.sumsqr(e) / s**2
             else:
                 lower = f.param(f"{block}.lower", np.zeros(len(lo)))
@@ -143,8 +144,9 @@ class Task(Term):
             blocks = self.errors(recorder)
         out = dict(recorder.values)
         if self.weight is not None:
+            ranges = self.limits()
             for block, (lo, hi) in self._limits(blocks).items():
-                if not (np.all(lo == 0) and np.all(hi == 0)):
+                if block in ranges:
                     out[f"{self.name}.{block}.lower"] = np.clip(lo, -BIG, BIG)
                     out[f"{self.name}.{block}.upper"] = np.clip(hi, -BIG, BIG)
             out[f"{self.name}.weight"] = np.array([self.weight])
