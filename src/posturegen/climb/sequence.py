@@ -120,7 +120,7 @@ def _kept(
             f"keep one of: {', '.join(x.name for x in previous.contacts)}",
         )
     position, yaw = frozen_pose(old, previous.robot.model, q_prev)
-    out = {k: v for k, v in c.items() if k in ("name", "mu", "friction", "cop_margin")}
+    out = {k: v for k, v in c.items() if k in ("name", "mu", "friction", "cop_margin", "unloaded")}
     out.setdefault("mu", float(old.mu))  # a kept contact keeps its friction coefficient
     if hasattr(old, "cop_margin"):  # and its CoP margin (else the stage's options give it)
         out.setdefault("cop_margin", float(old.cop_margin))

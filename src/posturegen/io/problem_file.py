@@ -193,6 +193,18 @@ def _solver_options(value: Any) -> SolverOptions:
     )
 
 
+_OPTION_KEYS = (
+    "initial",
+    "self_collision",
+    "solver",
+    "torque_limit_scale",
+    "environment_collision",
+    "collision_margin",
+    "collision_exclude",
+    "cop_margin",
+)
+
+
 def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
     """Validate a problem-file dict and build the :class:`Problem`.
 
@@ -220,21 +232,7 @@ def problem_from_dict(data: Any, base_dir: Path | None = None) -> Problem:
     ]
     tasks = _tasks(data.get("tasks", []) or [], robot, contacts)
     options = F.require_mapping(data.get("options", {}) or {}, "options")
-    F.check_keys(
-        options,
-        "options",
-        [],
-        [
-            "initial",
-            "self_collision",
-            "solver",
-            "torque_limit_scale",
-            "environment_collision",
-            "collision_margin",
-            "collision_exclude",
-            "cop_margin",
-        ],
-    )
+    F.check_keys(options, "options", [], _OPTION_KEYS)
     torque_scale = F.number(
         options.get("torque_limit_scale", 1.0), "options.torque_limit_scale", positive=True
     )

@@ -55,6 +55,7 @@ _CONTACT_VALUES: dict[str, dict[str, Any]] = {
     "yaw_range": _array(2),
     "points": {"type": "integer", "minimum": 3},
     "point": _array(2),
+    "unloaded": {"type": "boolean"},
 }
 _SURFACE = {
     "type": "object",

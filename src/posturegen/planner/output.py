@@ -85,6 +85,8 @@ def plan_summary(
         "nodes_expanded": stats.expanded,
         "postures_solved": stats.postures,
         "hold_fallbacks": stats.hold_fallbacks,
+        "unloads": stats.unloads,
+        "unload_fallbacks": stats.unload_fallbacks,
         "time_s": stats.time_s,
         "stances": [n.describe() for n in path],
         "transitions": [n.action.label() if n.action else "start" for n in path],

@@ -28,7 +28,13 @@ from .layout import pick_target
 from .node import Action, Node, Place, Stage, cell, place_of
 from .rules import Rules, patch_positions
 from .solver import RoundSolver
-from .transitions import hold_stage, lift_stage, touch_stage, unload_stage
+from .transitions import (
+    hold_stage,
+    lift_stage,
+    soft_unload_stage,
+    touch_stage,
+    unload_stage,
+)
 
 MAX_HOLDS = 1  # postures kept per place (stance and the cells of its contacts)
 
@@ -59,6 +65,8 @@ class Stats:
     failures: list[dict[str, str]] = field(default_factory=list)
     failed_problems: list[tuple[str, dict[str, Any]]] = field(default_factory=list)
     hold_fallbacks: int = 0  # adds whose hold failed: the touch posture held the stance
+    unloads: int = 0  # removals solved with the patch exactly where it was (fixed, unloaded)
+    unload_fallbacks: int = 0  # those that failed, then solved with the soft unload
 
 
 Progress = Callable[[Stats, Node | None, str], None]
@@ -197,6 +205,7 @@ class Search:
         self.stats.tried += len(round_)
         first = [self._build(n, a, None) for n, a in round_]
         answers = self._solve(first)
+        self._soft_unloads(round_, first, answers)
         holds: list[tuple[int, tuple[str, dict[str, Any], Any] | None]] = []
         for i, ((node, action), built, answer) in enumerate(
             zip(round_, first, answers, strict=True)
@@ -215,14 +224,36 @@ class Search:
                 nodes.append(child)
         return nodes
 
+    def _soft_unloads(
+        self, round_: list[tuple[Node, Action]], first: list[Any], answers: list[Any]
+    ) -> None:
+        """Exact unloads that failed, solved again as soft ones (in place)."""
+        if self.rules.release != "unload":
+            return
+        removes = [i for i, (_, a) in enumerate(round_) if a.kind == "remove" and first[i]]
+        self.stats.unloads += len(removes)
+        failed = [i for i in removes if not getattr(answers[i], "success", False)]
+        if not failed:
+            return
+        soft = [self._build(*round_[i], None, soft_unload_stage) for i in failed]
+        for i, b, a in zip(failed, soft, self._solve(soft), strict=True):
+            if b is not None:
+                first[i], answers[i] = b, a
+                self.stats.unload_fallbacks += 1
+
     def _build(
-        self, node: Node, action: Action, touch: tuple[Any, Result] | None
+        self,
+        node: Node,
+        action: Action,
+        touch: tuple[Any, Result] | None,
+        release: Callable[..., dict[str, Any]] | None = None,
     ) -> tuple[str, dict[str, Any], Any] | None:
         """(stage name, problem dict, Problem) of a transition's next posture, None when it
         cannot be built (said in the failures)."""
         try:
             if action.kind == "remove":
-                release = lift_stage if self.rules.release == "lift" else unload_stage
+                if release is None:
+                    release = lift_stage if self.rules.release == "lift" else unload_stage
                 data = release(self.seq, node, action, self.heur.goal)
             elif touch is None:
                 data = touch_stage(self.seq, node, action, self.rules, self.heur.goal)

@@ -41,6 +41,9 @@ class FixedContact(Contact):
     trace -1), with ``T_t = T_world_surface·T_surface_patch`` the target. Forces: one
     f = W·R_s·φ per point, φ_n >= 0 and the friction model on φ, W the robot's weight; the
     centre of pressure ``cop_margin`` [m] inside the intersection (:mod:`posturegen.terms.cop`).
+
+    ``unloaded``: the patch kept exactly where it is, bearing nothing (the pose rows only, no
+    force variable): a contact about to be removed, while the others bear the weight.
     """
 
     name: str
@@ -52,9 +55,17 @@ class FixedContact(Contact):
     friction: FrictionModel = field(default_factory=FrictionModel)
     type: str = "fixed"
     cop_margin: float = field(default=DEFAULT_COP_MARGIN, kw_only=True)  # [m]
+    unloaded: bool = field(default=False, kw_only=True)
 
     kind: ClassVar[str] = "fixed"
-    keys: ClassVar[tuple[str, ...]] = ("position", "yaw", "mu", "friction", "cop_margin")
+    keys: ClassVar[tuple[str, ...]] = (
+        "position",
+        "yaw",
+        "mu",
+        "friction",
+        "cop_margin",
+        "unloaded",
+    )
     fixed_in_place: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
@@ -68,7 +79,8 @@ class FixedContact(Contact):
                 "move the contact's position inside the surface polygon",
             )
         self.area = area  # intersection polygon in the surface plane
-        check_polygon_margin(area, self.cop_margin, self.patch.name, self.surface.name)
+        if not self.unloaded:  # an unloaded patch has no centre of pressure
+            check_polygon_margin(area, self.cop_margin, self.patch.name, self.surface.name)
         # force points: the intersection's vertices, in the parent joint frame of the patch
         pts_s = np.column_stack([area.vertices, np.zeros(area.n)])
         T_joint_surface = self.patch.T_joint_patch * self.T_surface_patch.inverse()
@@ -83,9 +95,11 @@ class FixedContact(Contact):
         return len(self.points_joint)
 
     def force_points_count(self) -> int:
-        return self.n_points
+        return 0 if self.unloaded else self.n_points
 
     def key(self) -> tuple[Any, ...]:
+        if self.unloaded:
+            return ("fixed", self.name, self.patch.name, "unloaded")
         cop = self.cop_margin > 0
         return ("fixed", self.name, self.patch.name, self.n_points, self.friction, cop)
 
@@ -100,6 +114,8 @@ class FixedContact(Contact):
         nlp.constrain(f"{pre}.orientation", ca.vertcat(E[2, 0], E[2, 1], E[1, 0]), 0.0, 0.0)
         # those rows also hold for E = Rz(π), Rx(π), Ry(π) (trace -1): keep the trace >= 0
         nlp.constrain(f"{pre}.orientation_branch", ca.trace(E), 0.0, np.inf)
+        if self.unloaded:
+            return
         pts = ca.reshape(nlp.parameter(f"{pre}.points_joint", 3 * k), 3, k)
         R_j, p_j = ctx.state.R[self.patch.joint_id], ctx.state.p[self.patch.joint_id]
         points = [p_j + R_j @ pts[:, i] for i in range(k)]
@@ -110,9 +126,14 @@ class FixedContact(Contact):
 
     def parameters(self, problem: Instance) -> dict[str, np.ndarray]:
         pre = f"contact.{self.name}"
-        out = {
+        pose = {
             f"{pre}.R_target": self.T_world_target.rotation,
             f"{pre}.p_target": self.T_world_target.translation,
+        }
+        if self.unloaded:
+            return pose
+        out = {
+            **pose,
             f"{pre}.R_surface": self.surface.T_world_surface.rotation,
             f"{pre}.mu": np.array([self.mu]),
             f"{pre}.points_joint": self.points_joint.T,
@@ -123,12 +144,17 @@ class FixedContact(Contact):
         return out
 
     def initial_guess(self, problem: Instance) -> dict[str, np.ndarray]:
+        if self.unloaded:
+            return {}
         return {f"contact.{self.name}.forces": force_guess(problem, self.n_points)}
 
     def to_dict(self, outputs: dict[str, np.ndarray]) -> dict[str, Any]:
         out = self._base_dict()
         out["pose"] = {"position": self.position.tolist(), "yaw": self.yaw}
         out["cop_margin"] = self.cop_margin
+        if self.unloaded:
+            out["unloaded"] = True  # "forces": [] (bearing nothing)
+            return out
         out["forces"] = forces_dict(self.patch.frame, outputs, f"contact.{self.name}")
         return out
 
@@ -145,10 +171,21 @@ class FixedContact(Contact):
             )
         pos = F.vector(entry["position"], 2, f"{fld}.position")
         yaw = F.angle(entry.get("yaw", 0.0), f"{fld}.yaw")
+        unloaded = entry.get("unloaded", False)
+        if not isinstance(unloaded, bool):
+            raise InputError(f"{fld}.unloaded", f"expected true or false, got {unloaded!r}", "")
         k = common
         try:
             return cls(
-                k.name, k.patch, k.surface, pos, yaw, k.mu, k.friction, cop_margin=k.cop_margin
+                k.name,
+                k.patch,
+                k.surface,
+                pos,
+                yaw,
+                k.mu,
+                k.friction,
+                cop_margin=k.cop_margin,
+                unloaded=unloaded,
             )
         except InputError as exc:
             raise InputError(
