@@ -19,6 +19,7 @@ from posturegen.model.geometry import ConvexPolygon
 from posturegen.model.robot import load_bundled
 from posturegen.model.scene import Surface
 from posturegen.planner import Budget, Goal, default_rules, parse_goal, parse_rules
+from posturegen.planner.command import write_figures
 from posturegen.planner.heuristic import Heuristic
 from posturegen.planner.layout import Region, pick_target
 from posturegen.planner.node import Action, Node
@@ -49,6 +50,21 @@ def test_stairs_plan_reaches_the_top_with_every_stage_verified(tmp_path):
     summary = json.loads((tmp_path / "plan.json").read_text())
     assert summary["reached"] and summary["postures_solved"] >= len(index["stages"])
     assert summary["stances"][-1] == "left_sole@step2, right_sole@step2"
+    # each removal tried exactly first (the patch fixed where it was, bearing nothing)
+    assert summary["unloads"] >= 1 and 0 <= summary["unload_fallbacks"] <= summary["unloads"]
+    unloads = [s for s in index["stages"] if s["name"].startswith("unload")]
+    exact = 0
+    for stage in unloads:
+        posture = json.loads((tmp_path / stage["posture"]).read_text())
+        held = [c for c in posture["contacts"] if c.get("unloaded")]
+        exact += len(held)
+        assert all(c["forces"] == [] for c in held)
+    assert len(unloads) - exact <= summary["unload_fallbacks"]  # a soft one only as fallback
+    # the plan's viewer and contact sheet, as `posturegen plan` writes them
+    (line,) = write_figures(tmp_path)
+    html, png = tmp_path / "plan.html", tmp_path / "plan.png"
+    assert "plan.html" in line and html.stat().st_size > 100_000
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000
 
 
 @pytest.mark.parametrize(

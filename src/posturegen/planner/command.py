@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 from typing import TextIO
 
+from ..viz import render_contact_sheet, write_html
 from .api import PlanReport, plan
 from .node import Node
 from .search import Budget, Stats
@@ -53,6 +54,19 @@ def summary_lines(report: PlanReport, out: Path) -> list[str]:
     return lines
 
 
+def write_figures(out: Path, meshes: str = "visual") -> list[str]:
+    """The plan's viewer (``plan.html``: a slider over the stances) and contact sheet
+    (``plan.png``) beside its sequence file; the line saying so, with their time."""
+    sequence = out / "sequence.json"
+    if not sequence.is_file():
+        return []
+    t0 = time.perf_counter()
+    html = write_html(sequence, out / "plan.html", meshes=meshes)
+    png = render_contact_sheet(sequence, out / "plan.png", meshes=meshes)
+    took = time.perf_counter() - t0
+    return [f"wrote {html} and {png} ({took:.1f} s, after the search)"]
+
+
 def cmd_plan(args: argparse.Namespace) -> int:
     """posturegen plan SCENE_OR_PROBLEM --goal GOAL --out DIR"""
     budget = Budget(
@@ -70,7 +84,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
         workers=args.workers,
         progress=None if args.quiet else ProgressLine(budget),
     )
-    for line in summary_lines(report, out):
+    lines = summary_lines(report, out)
+    if not args.no_figures:
+        lines += write_figures(out)
+    for line in lines:
         print(line)
     return EXIT_OK if report.success else EXIT_NOT_FOUND
 
@@ -99,4 +116,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--workers", type=int, default=1, help="processes solving sibling nodes")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.add_argument(
+        "--no-figures", action="store_true", help="write no plan.html (viewer) nor plan.png"
+    )
     p.set_defaults(func=cmd_plan)

@@ -24,6 +24,7 @@ from ..io.sequence_file import (
     read_json,
     write_sequence,
 )
+from .contact_sheet import render_contact_sheet
 from .figure import Drawing, draw_figure, render_png
 from .html import viewer_html, write_html
 from .meshes import MeshPart, RobotMeshes, decimate, mesh_cache_dir, robot_meshes, shape_mesh
@@ -52,6 +53,7 @@ __all__ = [
     "load_sequence",
     "mesh_cache_dir",
     "rasterize",
+    "render_contact_sheet",
     "read_json",
     "render_png",
     "robot_meshes",
