@@ -16,6 +16,9 @@ from posturegen.io.schema import problem_schema, shipped_schema_path, validate
 
 ROOT = Path(__file__).resolve().parent.parent
 PROBLEMS = sorted((ROOT / "examples" / "problems").glob("*.yaml"))
+PLAN_STARTS = [
+    p for p in sorted((ROOT / "examples" / "plans").glob("*.yaml")) if ".goal." not in p.name
+]
 DEMOS = sorted((ROOT / "src" / "posturegen" / "data" / "demos").glob("*.yaml"))
 
 
@@ -25,7 +28,7 @@ def test_the_shipped_schema_is_the_generated_one():
     assert json.loads(shipped_schema_path().read_text()) == problem_schema(user_tasks=False)
 
 
-@pytest.mark.parametrize("path", PROBLEMS + DEMOS, ids=lambda p: p.name)
+@pytest.mark.parametrize("path", PROBLEMS + DEMOS + PLAN_STARTS, ids=lambda p: p.name)
 def test_every_example_and_demo_problem_fits_the_schema(path):
     assert validate(read_yaml(path)) == []
 

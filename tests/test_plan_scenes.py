@@ -1,0 +1,42 @@
+"""Plans on scenes nobody scripted: a problem file's start stance and a goal file
+(examples/plans/NAME.yaml and NAME.goal.yaml), every posture of the path verified, the goal
+contacts held at the end, no contact put back where it was removed from."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from posturegen import plan
+from posturegen.io.problem_file import read_yaml
+from posturegen.model.robot import load_bundled
+from posturegen.planner import Budget
+from posturegen.verify import verify_posture
+
+PLANS = Path(__file__).resolve().parent.parent / "examples" / "plans"
+SCENES = ["platform", "stepping_stones", "beam", "high_step"]
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_a_scene_of_our_own_is_planned_and_every_posture_verified(name, tmp_path):
+    start, goal = PLANS / f"{name}.yaml", PLANS / f"{name}.goal.yaml"
+    report = plan(str(start), tmp_path, goal=str(goal), budget=Budget(nodes=30))
+    assert report.success, report.summary.get("stop")
+    robot = load_bundled(read_yaml(start)["robot"])
+    index = json.loads((tmp_path / "sequence.json").read_text())
+    places: list[set[tuple[str, str]]] = []
+    for stage in index["stages"]:
+        posture = json.loads((tmp_path / stage["posture"]).read_text())
+        assert stage["success"] and verify_posture(posture, robot.model).ok, stage["name"]
+        places.append(
+            {(c["robot_patch"]["name"], c["surface"]["name"]) for c in posture["contacts"]}
+        )
+    wanted = {(c["robot_patch"], c["surface"]) for c in read_yaml(goal)["contacts"]}
+    assert wanted <= places[-1]
+    # a (patch, surface) left is never taken again: the path goes forward
+    left: set[tuple[str, str]] = set()
+    for before, after in zip(places, places[1:], strict=False):
+        assert not (after - before) & left, (before, after)
+        left |= before - after
