@@ -71,6 +71,7 @@ def test_example_08():
 def test_example_09(tmp_path):
     report = _main("09")(tmp_path)
     assert report.success and (tmp_path / "sequence.json").is_file()
+    assert (tmp_path / "plan.html").is_file() and (tmp_path / "plan.png").is_file()
 
 
 def test_example_10():
