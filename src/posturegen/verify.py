@@ -31,7 +31,7 @@ from .io.posture_file import load_posture, model_of_posture
 from .model.geometry import ConvexPolygon, Ellipse, intersect
 from .model.kinematics import scratch_data
 from .terms.contacts import contact_types
-from .terms.contacts.base import points_in_plane
+from .terms.contacts.base import PlacedContact, points_in_plane
 from .terms.tasks import NumericFrames, read_task
 
 # Tolerances of the re-check. Lengths [m], angles [rad], forces relative to the weight.
@@ -65,20 +65,6 @@ class _Worst:
             Check("contact ellipse size", max(self.ellipse_size, 0.0), TOL_GEOMETRY),
             Check("centre of pressure margin", max(self.cop, 0.0), TOL_GEOMETRY),
         ]
-
-
-@dataclass(frozen=True)
-class _ContactFrames:
-    """A contact's surface and robot patch in the world at the posture."""
-
-    T_ws: pin.SE3  # surface frame
-    P_s: ConvexPolygon  # surface polygon (surface frame)
-    T_wc: pin.SE3  # robot patch frame
-    P_c: ConvexPolygon  # patch polygon (patch frame)
-
-    @property
-    def T_sc(self) -> pin.SE3:
-        return self.T_ws.inverse() * self.T_wc
 
 
 def verify_posture(
@@ -166,10 +152,10 @@ def polygon(vertices: Any) -> ConvexPolygon:
     return _POLYGONS.get_or_make(key, lambda: ConvexPolygon(np.array(key, dtype=float)))
 
 
-def _frames(contact: dict[str, Any], model: pin.Model, data: pin.Data) -> _ContactFrames:
+def _frames(contact: dict[str, Any], model: pin.Model, data: pin.Data) -> PlacedContact:
     surf, rp = contact["surface"], contact["robot_patch"]
     T_wc = data.oMf[model.getFrameId(rp["frame"])] * pin.SE3(np.array(rp["placement"], float))
-    return _ContactFrames(
+    return PlacedContact(
         pin.SE3(np.array(surf["placement"], dtype=float)),
         polygon(surf["vertices"]),
         T_wc,
@@ -204,9 +190,7 @@ def _check_contact(
     if kind is None:
         worst.inside = np.inf  # a type no registered class re-checks: not verified
     else:
-        worst.inside = max(
-            worst.inside, kind.recheck_outside(contact, f.T_ws, f.P_s, f.T_wc, f.P_c)
-        )
+        worst.inside = max(worst.inside, kind.recheck_outside(contact, f))
     ell = contact.get("ellipse")
     if ell is not None:
         worst.inside = max(worst.inside, _ellipse_outside(ell, f.T_ws, f.P_s, f.T_wc, f.P_c))
@@ -230,7 +214,7 @@ def _pose_error(contact: dict[str, Any], T_sc: pin.SE3) -> float:
 
 def _check_forces(
     contact: dict[str, Any],
-    f: _ContactFrames,
+    f: PlacedContact,
     model: pin.Model,
     data: pin.Data,
     weight: float,

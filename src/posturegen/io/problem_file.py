@@ -20,7 +20,7 @@ from ..model.robot import Robot, load_robot
 from ..model.scene import Scene
 from ..plausible import check_angles, check_target
 from ..solver.problem import Problem, SolverOptions, Term
-from ..terms.contacts import Contact, ContactEntry, contact_types
+from ..terms.contacts import Contact, ContactEntry, contact_class, contact_types
 from ..terms.cop import DEFAULT_COP_MARGIN
 from ..terms.costs import ForceCost, PostureCost, TorqueCost
 from ..terms.friction import FRICTION_KINDS, FrictionModel
@@ -103,14 +103,7 @@ def _contact(
     any_key = sorted({k for cls in types.values() for k in cls.keys})
     # required first, and misspelt keys of any contact type
     F.check_keys(c, fld, ["robot_patch", "surface", "type"], ["name", *any_key])
-    ctype = F.string(c["type"], f"{fld}.type")
-    if ctype not in types:
-        raise InputError(
-            f"{fld}.type",
-            f"unknown contact type '{ctype}'",
-            with_hint(ctype, types, f"use one of: {', '.join(types)}"),
-        )
-    cls = types[ctype]
+    cls = contact_class(F.string(c["type"], f"{fld}.type"), f"{fld}.type")
     F.check_keys(c, fld, ["robot_patch", "surface", "type"], ["name", *cls.keys])
     patch = robot.patch(F.string(c["robot_patch"], f"{fld}.robot_patch"), f"{fld}.robot_patch")
     surface = scene.surface(F.string(c["surface"], f"{fld}.surface"), f"{fld}.surface")

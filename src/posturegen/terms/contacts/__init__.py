@@ -5,6 +5,8 @@
 from .base import (
     Contact,
     ContactEntry,
+    PlacedContact,
+    contact_class,
     contact_types,
     declare_patch_frame,
     patch_in_surface,
@@ -22,6 +24,7 @@ from .support import SupportContact
 __all__ = [
     "Contact",
     "ContactEntry",
+    "PlacedContact",
     "EllipseContact",
     "FixedContact",
     "FloatingContact",
@@ -29,6 +32,7 @@ __all__ = [
     "InclusiveContact",
     "PointContact",
     "SupportContact",
+    "contact_class",
     "contact_types",
     "declare_patch_frame",
     "patch_in_surface",

@@ -20,7 +20,7 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
-from ...errors import InputError
+from ..._registry import Registry
 from ...model.geometry import ConvexPolygon
 from ...model.robot import Patch
 from ...model.scene import Surface
@@ -47,6 +47,21 @@ def polygon_in_surface(patch: Patch, T_surface_patch: pin.SE3) -> ConvexPolygon:
 def points_in_plane(T: pin.SE3, p_world: np.ndarray) -> np.ndarray:
     """World points (k, 3) [m] in the frame T (its plane: the first two coordinates)."""
     return (np.asarray(p_world, dtype=float) - T.translation) @ T.rotation
+
+
+@dataclass(frozen=True)
+class PlacedContact:
+    """A contact's surface and robot patch in the world at a posture (what ``verify``
+    re-checks a posture file's contact on)."""
+
+    T_ws: pin.SE3  # surface frame
+    P_s: ConvexPolygon  # surface polygon (surface frame)
+    T_wc: pin.SE3  # robot patch frame
+    P_c: ConvexPolygon  # patch polygon (patch frame)
+
+    @property
+    def T_sc(self) -> pin.SE3:
+        return self.T_ws.inverse() * self.T_wc
 
 
 @dataclass(frozen=True)
@@ -91,13 +106,7 @@ class Contact(Term):
         pose of the fixed contact it becomes for the next stance (a fixed contact: its own)."""
 
     @staticmethod
-    def recheck_outside(
-        entry: Mapping[str, Any],
-        T_ws: pin.SE3,
-        P_s: ConvexPolygon,
-        T_wc: pin.SE3,
-        P_c: ConvexPolygon,
-    ) -> float:
+    def recheck_outside(entry: Mapping[str, Any], f: PlacedContact) -> float:
         """[m] how far what this type keeps inside the surface lies outside it, from a posture
         file's entry (the force points and the ellipse are re-checked for every type)."""
         return 0.0
@@ -141,30 +150,21 @@ def declare_patch_frame(ctx: BuildContext, patch: Patch) -> tuple[ca.SX, ca.SX]:
 
 
 # ---------------------------------------------------------------------------- registry
-_CONTACTS: dict[str, type[Contact]] = {}
+_CONTACTS: Registry[type[Contact]] = Registry("contact")
 C = TypeVar("C", bound=type[Contact])
 
 
 def register_contact(cls: C) -> C:
     """Register a contact class under its ``kind`` (a decorator): problem files, the schema,
     ``verify`` and the climbs then know it. Another class under a known kind is an error."""
-    kind = getattr(cls, "kind", None)
-    if not isinstance(kind, str) or not kind:
-        raise InputError(f"{cls.__name__}.kind", "missing", "set kind = 'my_contact' on the class")
-    known = _CONTACTS.get(kind)
-    if known is not None and (known.__module__, known.__qualname__) != (
-        cls.__module__,
-        cls.__qualname__,
-    ):
-        raise InputError(
-            f"{cls.__name__}.kind",
-            f"contact type {kind!r} is registered already (by {known.__qualname__})",
-            "choose another kind",
-        )
-    _CONTACTS[kind] = cls
-    return cls
+    return _CONTACTS.register(cls)
 
 
 def contact_types() -> dict[str, type[Contact]]:
     """The registered contact classes by their ``type`` name, in registration order."""
-    return dict(_CONTACTS)
+    return _CONTACTS.types()
+
+
+def contact_class(kind: Any, fld: str) -> type[Contact]:
+    """The class of a problem file's contact ``type`` (one-line error for an unknown one)."""
+    return _CONTACTS.lookup(kind, fld)

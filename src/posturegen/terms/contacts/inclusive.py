@@ -8,13 +8,11 @@ from typing import Any, ClassVar
 
 import casadi as ca
 import numpy as np
-import pinocchio as pin
 
-from ...model.geometry import ConvexPolygon
 from ...model.robot import Patch
 from ...model.scene import Surface
 from ..nlp import BuildContext, Instance
-from .base import Contact, ContactEntry, points_in_plane, register_contact
+from .base import Contact, ContactEntry, PlacedContact, points_in_plane, register_contact
 from .floating import FloatingContact
 
 
@@ -54,14 +52,8 @@ class InclusiveContact(FloatingContact):
         return cls(k.name, k.patch, k.surface, k.mu, yaw_range=k.yaw_range)
 
     @staticmethod
-    def recheck_outside(
-        entry: Mapping[str, Any],
-        T_ws: pin.SE3,
-        P_s: ConvexPolygon,
-        T_wc: pin.SE3,
-        P_c: ConvexPolygon,
-    ) -> float:
+    def recheck_outside(entry: Mapping[str, Any], f: PlacedContact) -> float:
         """[m] how far the patch's worst vertex is outside the surface."""
-        v_c = np.column_stack([P_c.vertices, np.zeros(P_c.n)])
-        v_w = v_c @ T_wc.rotation.T + T_wc.translation
-        return float(-P_s.distance_inside(points_in_plane(T_ws, v_w)[:, :2]).min())
+        v_c = np.column_stack([f.P_c.vertices, np.zeros(f.P_c.n)])
+        v_w = v_c @ f.T_wc.rotation.T + f.T_wc.translation
+        return float(-f.P_s.distance_inside(points_in_plane(f.T_ws, v_w)[:, :2]).min())

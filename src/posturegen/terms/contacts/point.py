@@ -8,15 +8,13 @@ from typing import Any, ClassVar
 
 import casadi as ca
 import numpy as np
-import pinocchio as pin
 
 from ... import _fields as F
 from ...errors import InputError
-from ...model.geometry import ConvexPolygon
 from ...model.robot import Patch
 from ...model.scene import Surface
 from ..nlp import BuildContext, Instance
-from .base import Contact, ContactEntry, points_in_plane, register_contact
+from .base import Contact, ContactEntry, PlacedContact, points_in_plane, register_contact
 from .floating import FloatingContact
 
 
@@ -76,13 +74,7 @@ class PointContact(FloatingContact):
         return cls(k.name, k.patch, k.surface, k.mu, point, yaw_range=k.yaw_range)
 
     @staticmethod
-    def recheck_outside(
-        entry: Mapping[str, Any],
-        T_ws: pin.SE3,
-        P_s: ConvexPolygon,
-        T_wc: pin.SE3,
-        P_c: ConvexPolygon,
-    ) -> float:
+    def recheck_outside(entry: Mapping[str, Any], f: PlacedContact) -> float:
         """[m] how far the contact's point is outside the surface."""
         p_world = np.asarray(entry["point"]["world"], dtype=float)[None]
-        return float(-P_s.distance_inside(points_in_plane(T_ws, p_world)[:, :2])[0])
+        return float(-f.P_s.distance_inside(points_in_plane(f.T_ws, p_world)[:, :2])[0])

@@ -23,6 +23,7 @@ import casadi as ca
 import numpy as np
 
 from ... import _fields as F
+from ..._registry import Registry
 from ...errors import InputError
 from ...hints import with_hint
 from ...model.robot import Robot
@@ -252,27 +253,11 @@ def _check_joint(robot: Robot, name: str, fld: str) -> None:
 
 
 # ---------------------------------------------------------------------------- registry
-_TASKS: dict[str, type[Task]] = {}
+_TASKS: Registry[type[Task]] = Registry("task")
 T = TypeVar("T", bound=type[Task])
 
 
-def register_task(cls: T) -> T:
-    """Register a task class under its ``kind`` (a decorator): problem files, posture files,
-    ``verify`` and ``diagnose`` then know it. A kind registered twice is an error."""
-    kind = getattr(cls, "kind", None)
-    if not isinstance(kind, str) or not kind:
-        raise InputError(f"{cls.__name__}.kind", "missing", "set kind = 'my_task' on the class")
-    known = _TASKS.get(kind)
-    redefined = known is not None and (known.__module__, known.__qualname__) == (
-        cls.__module__,
-        cls.__qualname__,
-    )  # the same class defined again (a script or notebook cell run twice): replaced
-    if known is not None and known is not cls and not redefined:
-        raise InputError(
-            f"{cls.__name__}.kind",
-            f"task type {kind!r} is registered already (by {known.__qualname__})",
-            "choose another kind",
-        )
+def _check_fields(cls: type[Task]) -> None:
     missing = set(cls.fields) - {f.name for f in dataclasses.fields(cls)}
     if missing:
         raise InputError(
@@ -280,23 +265,21 @@ def register_task(cls: T) -> T:
             f"no attribute for the keys {sorted(missing)}",
             "declare each key of fields as a dataclass field of the same name",
         )
-    _TASKS[kind] = cls
+
+
+def register_task(cls: T) -> T:
+    """Register a task class under its ``kind`` (a decorator): problem files, posture files,
+    ``verify`` and ``diagnose`` then know it. A kind registered twice is an error."""
+    _TASKS.register(cls, _check_fields)
     return cls
 
 
 def task_types() -> dict[str, type[Task]]:
     """The registered task classes by their ``type`` name."""
-    return dict(_TASKS)
+    return _TASKS.types()
 
 
 def read_task(entry: Any, fld: str, index: int) -> Task:
     """The task of a file's entry, by its ``type`` (one-line error for an unknown one)."""
     entry = F.require_mapping(entry, fld)
-    kind = entry.get("type")
-    if kind not in _TASKS:
-        raise InputError(
-            f"{fld}.type",
-            "missing" if kind is None else f"unknown task type {kind!r}",
-            with_hint(str(kind), _TASKS, f"use one of {', '.join(sorted(_TASKS))}"),
-        )
-    return _TASKS[kind].read(entry, fld, index)
+    return _TASKS.lookup(entry.get("type"), f"{fld}.type").read(entry, fld, index)

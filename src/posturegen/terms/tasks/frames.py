@@ -41,6 +41,15 @@ class Frames(ABC):
     def param(self, name: str, value: Any) -> Expr:
         """A parameter of the task (its numeric value: ``value``), flattened (n,)."""
 
+    def rotation_param(self, name: str, R: Any) -> Expr:
+        """A rotation (3, 3) parameter of the task (value R), column-major as the program's
+        parameters are."""
+        return self._matrix3(self.param(name, np.asarray(R, dtype=float).ravel(order="F")))
+
+    @abstractmethod
+    def _matrix3(self, v: Expr) -> Expr:
+        """A (9,) column-major vector as a (3, 3) matrix."""
+
     def position(self, frame: str) -> Expr:
         """p_world_frame (3,) [m]."""
         return self.placement(frame)[1]
@@ -96,6 +105,9 @@ class SymbolicFrames(Frames):
             self._params[name] = self.ctx.nlp.parameter(f"{self.prefix}.{name}", n)
         return self._params[name]
 
+    def _matrix3(self, v: Expr) -> Expr:
+        return ca.reshape(v, 3, 3)
+
     def vertcat(self, *parts: Expr) -> Expr:
         return ca.vertcat(*parts)
 
@@ -133,6 +145,9 @@ class NumericFrames(Frames):
 
     def param(self, name: str, value: Any) -> Expr:
         return np.asarray(value, dtype=float).ravel()
+
+    def _matrix3(self, v: Expr) -> Expr:
+        return np.asarray(v, dtype=float).reshape(3, 3, order="F")
 
     def vertcat(self, *parts: Expr) -> Expr:
         return np.concatenate([np.atleast_1d(np.asarray(p, dtype=float)).ravel() for p in parts])

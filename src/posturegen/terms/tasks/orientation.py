@@ -5,7 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-import casadi as ca
 import numpy as np
 import pinocchio as pin
 
@@ -33,10 +32,8 @@ class OrientationTask(Task):
     rpy: np.ndarray  # (3,) [rad]
 
     def errors(self, f: Frames) -> dict[str, Expr]:
-        R_target = pin.rpy.rpyToMatrix(*self.rpy).ravel(order="F")
-        Rt = f.param("R_target", R_target)
-        Rt = ca.reshape(Rt, 3, 3) if isinstance(Rt, ca.SX) else Rt.reshape(3, 3, order="F")
-        e, trace = rotation_error(f, Rt, f.rotation(self.frame))
+        Rt = f.rotation_param("R_target", pin.rpy.rpyToMatrix(*self.rpy))
+        e, trace = rotation_error(f.vertcat, Rt, f.rotation(self.frame))
         return {"orientation": e, "orientation_branch": trace}
 
     def limits(self) -> dict[str, tuple[ArrayLike, ArrayLike]]:

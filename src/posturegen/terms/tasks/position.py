@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -16,11 +16,11 @@ from .fields import Field
 from .frames import Expr, Frames
 
 
-def rotation_error(f: Frames, R_target: Expr, R: Expr) -> tuple[Expr, Expr]:
+def rotation_error(vertcat: Callable[..., Expr], R_target: Expr, R: Expr) -> tuple[Expr, Expr]:
     """(sin θ · axis (3,), tr(R_targetᵀ R)) of the rotation R_targetᵀ R = exp(θ axis): the
     error rows vanish for θ = 0 and π, the trace >= 0 keeps θ = 0."""
     E = R_target.T @ R
-    e = f.vertcat(E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]) * 0.5
+    e = vertcat(E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]) * 0.5
     return e, E[0, 0] + E[1, 1] + E[2, 2]
 
 
@@ -59,9 +59,8 @@ class PositionTask(Task):
         R, p = f.placement(self.frame)
         out = {"position": p - f.param("target", self.target)}
         if self.rpy is not None:
-            Rt = f.param("R_target", np.asarray(self.R_target).ravel(order="F"))
-            Rt = ca.reshape(Rt, 3, 3) if isinstance(Rt, ca.SX) else Rt.reshape(3, 3, order="F")
-            out["orientation"], out["orientation_branch"] = rotation_error(f, Rt, R)
+            Rt = f.rotation_param("R_target", self.R_target)
+            out["orientation"], out["orientation_branch"] = rotation_error(f.vertcat, Rt, R)
         return out
 
     def limits(self) -> dict[str, tuple[ArrayLike, ArrayLike]]:
@@ -79,7 +78,7 @@ class PositionTask(Task):
             cost = ca.sumsqr(p - nlp.parameter(f"{self.name}.target", 3)) / 0.01
             if self.rpy is not None:
                 Rt = ca.reshape(nlp.parameter(f"{self.name}.R_target", 9), 3, 3)
-                cost += ca.sumsqr(rotation_error(_SX, Rt, R)[0])
+                cost += ca.sumsqr(rotation_error(ca.vertcat, Rt, R)[0])
             nlp.minimize(self.name, self.weight * cost)
         R, p = ctx.kin.frame_placement(ctx.state, ctx.robot.frame_id(self.frame))
         ctx.nlp.output(f"{self.name}.position", p)
@@ -107,17 +106,6 @@ class PositionTask(Task):
         elif isinstance(entry, Mapping) and "rotation" in entry:
             entry = {k: v for k, v in entry.items() if k != "rotation"}
         return super().read(entry, fld, index)
-
-
-class _Vertcat:
-    """The one operation :func:`rotation_error` needs, on CasADi (the soft cost's path)."""
-
-    @staticmethod
-    def vertcat(*parts: Expr) -> Expr:
-        return ca.vertcat(*parts)
-
-
-_SX: Any = _Vertcat()
 
 
 @register_task

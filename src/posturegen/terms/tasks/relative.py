@@ -5,7 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-import casadi as ca
 import numpy as np
 import pinocchio as pin
 
@@ -43,9 +42,10 @@ class RelativeTask(Task):
         R, p = f.placement(self.frame)
         out = {"position": R_ref.T @ (p - p_ref) - f.param("target", self.target)}
         if self.rpy is not None:
-            Rt = f.param("R_target", pin.rpy.rpyToMatrix(*self.rpy).ravel(order="F"))
-            Rt = ca.reshape(Rt, 3, 3) if isinstance(Rt, ca.SX) else Rt.reshape(3, 3, order="F")
-            out["orientation"], out["orientation_branch"] = rotation_error(f, Rt, R_ref.T @ R)
+            Rt = f.rotation_param("R_target", pin.rpy.rpyToMatrix(*self.rpy))
+            out["orientation"], out["orientation_branch"] = rotation_error(
+                f.vertcat, Rt, R_ref.T @ R
+            )
         return out
 
     def limits(self) -> dict[str, tuple[ArrayLike, ArrayLike]]:
