@@ -98,7 +98,8 @@ def test_a_bad_codegen_variable_is_a_one_line_error(monkeypatch, tmp_path, capsy
     with pytest.raises(InputError) as err:
         codegen.resolve_mode(None)
     assert str(err.value) == (
-        "$POSTUREGEN_CODEGEN: unknown codegen mode 'fast' (use one of: auto, sync, background, off)"
+        "$POSTUREGEN_CODEGEN: unknown codegen mode 'fast' "
+        "(use one of: auto, sync, background, cached, off)"
     )
     _CACHE.clear()  # a structure compiled before would not look at the variable
     code = main(["solve", str(_demo_dir() / "stand-reach.yaml"), "--out", str(tmp_path)])
@@ -166,6 +167,29 @@ def test_second_build_loads_from_disk_without_compiling(cache, monkeypatch):
     r = solve(p)
     assert r.success, r.message
     assert compiled.library
+
+
+@needs_cc
+def test_cached_runs_a_library_on_disk_and_compiles_nothing(cache, monkeypatch):
+    """Mode cached (the planner's): the stand-reach library on disk is run; a structure
+    without one (other compiler flags: another key) runs the virtual machine at every use, and
+    no build starts."""
+    _problem("sync").compile()  # on disk (built by an earlier test or now)
+    _CACHE.clear()  # as in a new process
+
+    def no_compiler(*args, **kwargs):
+        raise AssertionError("compiled")
+
+    monkeypatch.setattr(codegen, "_generate", no_compiler)
+    monkeypatch.setattr(codegen, "_compile", no_compiler)
+    r = solve(_problem("cached"))
+    assert r.success and r.generated_c, r.message
+    monkeypatch.setattr(codegen, "HOT_FLAGS", ("-O0", "-DCACHED"))  # no library under this key
+    _CACHE.clear()
+    for _ in range(3):
+        r = solve(_problem("cached"))
+        assert r.success and not r.generated_c, r.message
+    assert not codegen.pending()
 
 
 def _declaring(monkeypatch) -> list[int]:

@@ -1,6 +1,7 @@
 """Plans on scenes nobody scripted: a problem file's start stance and a goal file
-(examples/plans/NAME.yaml and NAME.goal.yaml), every posture of the path verified, the goal
-contacts held at the end, no contact put back where it was removed from."""
+(examples/plans/NAME.yaml, NAME.goal.yaml and, if any, NAME.rules.yaml; Talos and HRP-2),
+every posture of the path verified, the goal contacts held at the end, no contact put back
+where it was removed from."""
 
 from __future__ import annotations
 
@@ -16,13 +17,20 @@ from posturegen.planner import Budget
 from posturegen.verify import verify_posture
 
 PLANS = Path(__file__).resolve().parent.parent / "examples" / "plans"
-SCENES = ["platform", "stepping_stones", "beam", "high_step"]
+SCENES = ["platform", "stepping_stones", "beam", "high_step", "hrp2_platform", "ladder_platform"]
 
 
 @pytest.mark.parametrize("name", SCENES)
 def test_a_scene_of_our_own_is_planned_and_every_posture_verified(name, tmp_path):
     start, goal = PLANS / f"{name}.yaml", PLANS / f"{name}.goal.yaml"
-    report = plan(str(start), tmp_path, goal=str(goal), budget=Budget(nodes=30))
+    rules = PLANS / f"{name}.rules.yaml"
+    report = plan(
+        str(start),
+        tmp_path,
+        goal=str(goal),
+        rules=str(rules) if rules.is_file() else None,
+        budget=Budget(nodes=30),
+    )
     assert report.success, report.summary.get("stop")
     robot = load_bundled(read_yaml(start)["robot"])
     index = json.loads((tmp_path / "sequence.json").read_text())

@@ -17,7 +17,9 @@ from posturegen.io.schema import problem_schema, shipped_schema_path, validate
 ROOT = Path(__file__).resolve().parent.parent
 PROBLEMS = sorted((ROOT / "examples" / "problems").glob("*.yaml"))
 PLAN_STARTS = [
-    p for p in sorted((ROOT / "examples" / "plans").glob("*.yaml")) if ".goal." not in p.name
+    p
+    for p in sorted((ROOT / "examples" / "plans").glob("*.yaml"))
+    if ".goal." not in p.name and ".rules." not in p.name
 ]
 DEMOS = sorted((ROOT / "src" / "posturegen" / "data" / "demos").glob("*.yaml"))
 

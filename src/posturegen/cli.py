@@ -29,6 +29,7 @@ from .batch.sources import read_sources
 from .bench.cold import COLD_FAMILIES, COLD_SEED, cold_table, run_cold, run_peer
 from .bench.families import FAMILIES, FamilyReport, comparison_lines, run_families
 from .bench.planner import PlannerReport, run_planner_family
+from .bench.plans import PLAN_FAMILIES, plan_table, run_plan_family
 from .bench.reach import PLANNER_FAMILIES
 from .bench.scaling import DEFAULT_FAMILY, ScalingRow, batch_scaling, machine_line, table
 from .bench.table import results_table, write_markdown
@@ -248,12 +249,14 @@ def _add_png_option(p: argparse.ArgumentParser) -> None:
 
 def cmd_bench(args: argparse.Namespace) -> int:
     """posturegen bench [--json FILE] [--markdown FILE] | posturegen bench --batch"""
-    known = {**FAMILIES, **PLANNER_FAMILIES}
-    names = args.family or list(known)
+    known = {**FAMILIES, **PLANNER_FAMILIES, **PLAN_FAMILIES}
+    names = args.family or list(PLAN_FAMILIES if args.plans else FAMILIES | PLANNER_FAMILIES)
     for name in names:
         if name not in known:
             hint = with_hint(name, known, f"known: {', '.join(known)}")
             raise PosturegenError(f"--family: unknown family '{name}' ({hint})")
+    if args.plans or any(name in PLAN_FAMILIES for name in names):
+        return _bench_plans(args, names)
     if args.batch:
         return _bench_batch(args)
     if args.cold:
@@ -325,6 +328,27 @@ def _labelled(report: R, solver: str, solvers: list[str]) -> R:
     if len(solvers) < 2:
         return report
     return dataclasses.replace(report, family=f"{report.family} [{solver}]")  # type: ignore[type-var]
+
+
+def _bench_plans(args: argparse.Namespace, names: list[str]) -> int:
+    """posturegen bench --plans: each plan family by ``posturegen plan``, cold then warm."""
+    others = [name for name in names if name not in PLAN_FAMILIES]
+    if others:
+        raise PosturegenError(f"--family: {others[0]} is not a plan family (--plans runs those)")
+    before = machine_line()
+    print(f"plans, each cold (an empty cache) then warm, default budgets: {before}")
+    reports = []
+    for name in names:
+        reports.append(run_plan_family(name))
+        print(reports[-1].line(), flush=True)
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps([asdict(r) for r in reports], indent=1))
+    if args.markdown:
+        after = machine_line().rsplit("load average ", 1)[1]
+        head = f"Measured on {before} (after: load {after})."
+        write_markdown(args.markdown, [head, "", *plan_table(reports)], "bench-plans")
+    return EXIT_OK
 
 
 def _bench_cold(args: argparse.Namespace) -> int:
@@ -436,6 +460,12 @@ def _add_bench_parser(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="the collision families on problems never seen: each in a fresh process with an "
         "empty cache, timed from its first call (default 50 problems each)",
+    )
+    p.add_argument(
+        "--plans",
+        action="store_true",
+        help="the plan families (plan-...): posturegen plan on each, cold (an empty cache) "
+        "then warm; --family plan-... runs one",
     )
     p.add_argument(
         "--peer",

@@ -19,6 +19,7 @@ from ..hints import with_hint
 from ..model.robot import Robot, load_robot
 from ..model.scene import Scene
 from ..plausible import check_angles, check_target
+from ..solver import codegen
 from ..solver.problem import Problem, SolverOptions, Term
 from ..terms.contacts import Contact, ContactEntry, contact_class, contact_types
 from ..terms.cop import DEFAULT_COP_MARGIN
@@ -157,11 +158,28 @@ def _solver_options(value: Any) -> SolverOptions:
         v,
         "options.solver",
         [],
-        ["tol", "max_iter", "max_call_iter", "max_cpu_time", "print_level", "jit", "method", "qp"],
+        [
+            "tol",
+            "max_iter",
+            "max_call_iter",
+            "max_cpu_time",
+            "print_level",
+            "jit",
+            "codegen",
+            "method",
+            "qp",
+        ],
     )
     jit = v.get("jit", False)
     if not isinstance(jit, bool):
         raise InputError("options.solver.jit", f"expected true or false, got {jit!r}", "write true")
+    mode = v.get("codegen")
+    if mode is not None and mode not in codegen.MODES:
+        raise InputError(
+            "options.solver.codegen",
+            f"unknown mode {mode!r}",
+            f"use one of: {', '.join(codegen.MODES)}",
+        )
     base = SolverOptions()
     call = v.get("max_call_iter")
     return SolverOptions(
@@ -176,6 +194,7 @@ def _solver_options(value: Any) -> SolverOptions:
             v.get("max_cpu_time", base.max_cpu_time), "options.solver.max_cpu_time", positive=True
         ),
         jit=jit,
+        codegen=mode,
         method=None if v.get("method") is None else F.string(v["method"], "options.solver.method"),
         qp=None if v.get("qp") is None else F.string(v["qp"], "options.solver.qp"),
         print_level=int(

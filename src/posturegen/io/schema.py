@@ -17,6 +17,7 @@ from typing import Any
 import jsonschema
 
 from .._fields import read_yaml
+from ..solver import codegen
 from ..terms.contacts import contact_types
 from ..terms.tasks import task_types
 
@@ -89,6 +90,7 @@ _SOLVER = {
         "max_cpu_time": {"type": "number", "exclusiveMinimum": 0},
         "print_level": {"type": "integer"},
         "jit": {"type": "boolean"},
+        "codegen": {"enum": list(codegen.MODES)},
         "method": {"enum": ["ipopt", "sqp", "auto"]},
         "qp": {"enum": ["daqp", "proxsuite"]},
     },

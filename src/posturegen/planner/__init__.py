@@ -1,5 +1,6 @@
-"""A contact planner on top of the posture generator (``posturegen plan``): a weighted-A*
-search over stances whose transitions are checked by posture generation (paper sec. IV-E).
+"""A contact planner on top of the posture generator (``posturegen plan``): a focal search
+(bounded-suboptimal A*) over stances whose transitions are checked by posture generation
+(paper sec. IV-E).
 
     >>> report = pg.plan("stairs", "out/", robot="atlas", workers=2)
     >>> report.success, report.stats.postures

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import copy
 import json
+import os
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,12 +17,12 @@ from ..errors import InputError
 from ..io.problem_file import problem_from_dict, read_yaml
 from ..model.robot import Robot
 from ..solver.problem import Problem
-from ..solver.solve import Result, solve
+from ..solver.solve import Result
 from .goal import Goal, parse_goal
 from .heuristic import Heuristic
 from .layout import goal_spots, regions
 from .node import Node, Stage
-from .output import plan_summary, write_failed, write_sequence
+from .output import plan_summary, plan_times, write_failed, write_sequence
 from .quality import Quality
 from .rules import Rules, default_rules, parse_rules, patch_positions
 from .scenes import PLANS, default_goal, plan_scene, scene_rules
@@ -101,9 +103,9 @@ def _start(seq: Mapping[str, Any], data: dict, problem: Problem, solver: RoundSo
             dict(seq), {"name": "start (fixed)", "contacts": keep}, 1, problem, result.q
         )
         problem = problem_from_dict(data)
-        result = solve(problem)
-        if not result.success:
-            why = result.message
+        result = solver.solve([data], [problem])[0]
+        if not isinstance(result, Result) or not result.success:
+            why = getattr(result, "message", "")
             raise InputError("start", "the start stance, fixed, holds no verified posture", why)
         stages.append(Stage("start (fixed)", data, problem, result))
     key = frozenset((c.patch.name, c.surface.name) for c in problem.contacts)
@@ -136,6 +138,25 @@ def _inputs(
     return parse_goal(goal_value, list(model.patches), surfaces, frames), the_rules
 
 
+# A plan meets each program structure a few times: a structure whose library is on disk runs
+# it, any other the virtual machine, and nothing is compiled (posturegen.solver.codegen, mode
+# cached: there, the measurements).
+PLAN_CODEGEN = "cached"
+
+
+def _solver_options(seq: dict[str, Any], budget: Budget) -> None:
+    """The stages' solver options: the budget's iterations per posture, and PLAN_CODEGEN
+    unless the scene or $POSTUREGEN_CODEGEN sets a mode."""
+    options = seq.setdefault("options", {})
+    solver = dict(options.get("solver") or {})
+    if budget.posture_iterations is not None:
+        F.integer(budget.posture_iterations, "budget.posture_iterations", 1, "give 1 or more")
+        solver["max_call_iter"] = budget.posture_iterations
+    if not os.environ.get("POSTUREGEN_CODEGEN") and not solver.get("jit"):
+        solver.setdefault("codegen", PLAN_CODEGEN)
+    options["solver"] = solver
+
+
 def plan(
     source: Any,
     out: str | Path,
@@ -153,15 +174,10 @@ def plan(
     ``robot`` and ``steps`` as for ``climb``) or a problem (dict or file) whose contacts are
     the start stance; ``goal``/``rules``: dicts or files (posturegen.planner.goal / .rules;
     a scene has defaults); ``workers`` > 1 solves sibling transitions on the batch pool."""
+    t0 = time.perf_counter()
     seq, start_stage, scene_name = _source(source, robot, steps)
     budget = budget or Budget()
-    if budget.posture_iterations is not None:
-        F.integer(budget.posture_iterations, "budget.posture_iterations", 1, "give 1 or more")
-        options = seq.setdefault("options", {})
-        options["solver"] = {
-            **(options.get("solver") or {}),
-            "max_call_iter": budget.posture_iterations,
-        }
+    _solver_options(seq, budget)
     data, problem = _start_problem(seq, start_stage)
     the_goal, the_rules = _inputs(seq, scene_name, problem, goal, rules)
     with RoundSolver(workers) as solver:
@@ -172,10 +188,12 @@ def plan(
         start.extra["frame"] = frame_position(the_goal.frame, start.q, model)
         start.h = heur.h(start.key, start.positions, start.extra["frame"])
         best, stats = search.run(start)
+    t_files = time.perf_counter()
     path = best.path()
     report, quality = write_sequence(seq, path, stats.reached, Path(out))
     write_failed(stats, Path(out))
     goal_d, rules_d = the_goal.to_dict(), the_rules.to_dict()
-    summary = plan_summary(seq, goal_d, rules_d, budget, stats, path, quality)
+    times = plan_times(time.perf_counter() - t0, time.perf_counter() - t_files, solver.timing)
+    summary = plan_summary(seq, goal_d, rules_d, budget, stats, path, quality, times)
     (Path(out) / "plan.json").write_text(json.dumps(summary, indent=1))
     return PlanReport(report, stats, quality, the_goal, the_rules, summary)

@@ -15,6 +15,7 @@ from ..climb.sequence import SequenceReport, StageReport, _slug, _write_index
 from .node import Node
 from .quality import Quality, posture_quality, worst
 from .search import Budget, Stats
+from .solver import Timing
 
 PLAN_SCHEMA = "posturegen.plan/1"
 
@@ -57,6 +58,22 @@ def write_failed(stats: Stats, out: Path) -> None:
         (folder / f"{k:02d}-{_slug(name)}.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
 
 
+def plan_times(total: float, files: float, timing: Timing) -> dict[str, float]:
+    """Where a plan's wall time went [s]: ``total``; ``postures_s``, the rounds of posture
+    solves (the start's included), split (summed over the postures, across workers) into
+    ``solver_s``, ``build_s``, ``verify_s`` and ``other_s``; ``search_s``, the rest of the
+    search (successors, the heuristic, building problems); ``files_s``, writing them."""
+    t = timing.to_dict()
+    postures = t.pop("rounds_s")
+    return {
+        "total_s": round(total, 3),
+        "postures_s": postures,
+        **t,
+        "search_s": round(max(0.0, total - postures - files), 3),
+        "files_s": round(files, 3),
+    }
+
+
 def plan_summary(
     seq: Mapping[str, Any],
     goal: Mapping[str, Any],
@@ -65,8 +82,9 @@ def plan_summary(
     stats: Stats,
     path: list[Node],
     quality: Quality,
+    times: Mapping[str, float],
 ) -> dict[str, Any]:
-    """The content of ``plan.json``."""
+    """The content of ``plan.json`` (``times``: :func:`plan_times`)."""
     return {
         "schema": PLAN_SCHEMA,
         "name": seq.get("name", "plan"),
@@ -80,14 +98,16 @@ def plan_summary(
         },
         "reached": stats.reached,
         "stop": stats.stop,
+        "best": stats.best,
+        "blocked": list(stats.blocked),
         "transitions_tried": stats.tried,
         "stances_held": stats.held,
         "nodes_expanded": stats.expanded,
         "postures_solved": stats.postures,
         "hold_fallbacks": stats.hold_fallbacks,
         "unloads": stats.unloads,
-        "unload_fallbacks": stats.unload_fallbacks,
         "time_s": stats.time_s,
+        "time": dict(times),
         "stances": [n.describe() for n in path],
         "transitions": [n.action.label() if n.action else "start" for n in path],
         "quality": quality.to_dict(),

@@ -1,14 +1,15 @@
-"""Weighted-A* search over stances (after Escande, Kheddar and Miossec, RAS 2013, the paper's
-ref. [8]): the open list holds transitions not yet tried, ordered by their child's estimated
-f; each round pops as many as there are workers, solves their postures together
-(posturegen.planner.solver), and pushes the successors of the stances that held. A stance is
-closed once held at a place (its contacts' surfaces and their positions to 10 cm: a foot
-placed further on the same ground is another place); a transition that failed is never tried again,
-and its problem is kept (``Stats.failed_problems``) for ``posturegen solve`` to diagnose."""
+"""Focal search over stances (after Escande, Kheddar and Miossec, RAS 2013, the paper's
+ref. [8]; the order in posturegen.planner.heuristic): the open list holds transitions not yet
+tried, with their cost and their child's estimates; each round pops as many as there are
+workers, solves their postures together (posturegen.planner.solver), and pushes the successors
+of the stances that held. A stance is closed once held at a place (its contacts' surfaces and
+their positions to 10 cm: a foot placed further on the same ground is another place); no patch
+is placed back within REVISIT of a place it left on the same surface; a transition that failed
+is never tried again, and its problem is kept (``Stats.failed_problems``) for ``posturegen
+solve`` to diagnose."""
 
 from __future__ import annotations
 
-import heapq
 import itertools
 import time
 from collections.abc import Callable, Mapping
@@ -23,20 +24,36 @@ from ..errors import PosturegenError
 from ..io.problem_file import problem_from_dict
 from ..model.robot import Robot
 from ..solver.solve import Result
-from .heuristic import STEP_COST, Heuristic
+from .blocked import blocked_lines
+from .heuristic import FOCAL, RECENT, Heuristic
 from .layout import pick_target
-from .node import Action, Node, Place, Stage, cell, place_of
+from .node import Action, Key, Node, Place, Stage, cell, place_of
 from .rules import Rules, patch_positions
 from .solver import RoundSolver
 from .transitions import (
     hold_stage,
     lift_stage,
-    soft_unload_stage,
     touch_stage,
     unload_stage,
 )
 
 MAX_HOLDS = 1  # postures kept per place (stance and the cells of its contacts)
+REVISIT = 0.1  # [m] a patch is not placed again this near a place it left on the same surface
+
+
+@dataclass
+class _Entry:
+    """An untried transition in the open list: its child's ``g + bound`` (the focal
+    bound's), its focal order, its depth, its cost [m]."""
+
+    bounded: float
+    order: float
+    depth: int
+    count: int
+    node: Node
+    action: Action
+    child: Place
+    cost: float
 
 
 @dataclass(frozen=True)
@@ -44,11 +61,12 @@ class Budget:
     """The search stops after ``nodes`` transitions tried or ``seconds`` [s] of wall time;
     ``posture_iterations``: each posture's IPOPT iterations, all its runs (the stages'
     options.solver.max_call_iter; None: unbounded), so that a stance that cannot be held
-    fails fast."""
+    fails fast (an unload has at most EXACT_UNLOAD_ITER). Its default: on the four shipped
+    plans (2026-12-04) the verified holds took at most 112 iterations, the touches 61-1406."""
 
     nodes: int = 60
     seconds: float = 1800.0
-    posture_iterations: int | None = None
+    posture_iterations: int | None = 1500
 
 
 @dataclass
@@ -65,8 +83,11 @@ class Stats:
     failures: list[dict[str, str]] = field(default_factory=list)
     failed_problems: list[tuple[str, dict[str, Any]]] = field(default_factory=list)
     hold_fallbacks: int = 0  # adds whose hold failed: the touch posture held the stance
-    unloads: int = 0  # removals solved with the patch exactly where it was (fixed, unloaded)
-    unload_fallbacks: int = 0  # those that failed, then solved with the soft unload
+    unloads: int = 0  # removals tried, each with the patch exactly where it was (fixed, unloaded)
+    # when the goal was not reached: the best stance found, and what kept each goal contact
+    # it lacks from it (one line each)
+    best: str = ""
+    blocked: list[str] = field(default_factory=list)
 
 
 Progress = Callable[[Stats, Node | None, str], None]
@@ -98,7 +119,7 @@ class Search:
         self.stats = Stats()
         self.holds: dict[Place, int] = {}
         self.failed: set[tuple[Place, Action]] = set()
-        self._open: list[tuple[float, int, Node, Action, Place]] = []
+        self._open: list[_Entry] = []
         self._count = itertools.count()
 
     def run(self, start: Node) -> tuple[Node, Stats]:
@@ -116,14 +137,21 @@ class Search:
             if stop:
                 self.stats.stop = stop
                 break
-            round_ = self._pop_round()
-            for node in self._evaluate(round_):
+            round_, costs = self._pop_round()
+            for node in self._evaluate(round_, costs):
                 if self.heur.reached(node.key, node.extra.get("frame")) or node.h < best.h:
                     best = node
                 self._push_successors(node)
         self.stats.time_s = time.perf_counter() - t0
         self.stats.postures = self.solver.solved
+        if not self.stats.reached:
+            self.stats.best = best.describe()
+            self.stats.blocked = self.blocked(best)
         return best, self.stats
+
+    def blocked(self, node: Node) -> list[str]:
+        """Why the stance does not hold the goal (posturegen.planner.blocked)."""
+        return blocked_lines(node, self.heur, self.rules, self.stats.failures, self.stats.stop)
 
     def _closed(self, key: Place) -> bool:
         return self.holds.get(key, 0) >= MAX_HOLDS
@@ -137,21 +165,41 @@ class Search:
             return f"time budget ({self.budget.seconds:.0f} s) spent"
         return ""
 
-    def _pop_round(self) -> list[tuple[Node, Action]]:
-        """Up to ``workers`` untried transitions to distinct new stances, best first."""
+    def _pop_round(self) -> tuple[list[tuple[Node, Action]], list[float]]:
+        """Up to ``workers`` untried transitions to distinct new stances, each the focal
+        list's first (:mod:`posturegen.planner.heuristic`), and their costs [m]."""
         out: list[tuple[Node, Action]] = []
+        costs: list[float] = []
         keys: set[Place] = set()
         room = min(self.solver.workers, self.budget.nodes - self.stats.tried)
-        while self._open and len(out) < room:
-            _, _, node, action, child = heapq.heappop(self._open)
-            if self._closed(child) or child in keys or (node.place, action) in self.failed:
-                continue
-            keys.add(child)
-            out.append((node, action))
-        return out
+        while len(out) < room:
+            entry = self._pop_focal(keys)
+            if entry is None:
+                break
+            keys.add(entry.child)
+            out.append((entry.node, entry.action))
+            costs.append(entry.cost)
+        return out, costs
+
+    def _pop_focal(self, taken: set[Place]) -> _Entry | None:
+        """The open transition of least focal order among those whose ``g + bound`` is within
+        FOCAL × the least (ties: fewer stages, then first pushed); stale ones dropped."""
+        self._open = [
+            e
+            for e in self._open
+            if not self._closed(e.child) and (e.node.place, e.action) not in self.failed
+        ]
+        live = [e for e in self._open if e.child not in taken]
+        if not live:
+            return None
+        least = min(e.bounded for e in live)
+        focal = [e for e in live if e.bounded <= FOCAL * least + 1e-12]
+        best = min(focal, key=lambda e: (e.order, e.depth, e.count))
+        self._open.remove(best)
+        return best
 
     def _push_successors(self, node: Node) -> None:
-        """Every allowed transition from the node, with its child's estimated f."""
+        """Every allowed transition from the node, with its cost and its child's estimates."""
         self.stats.expanded += 1
         for action in self._actions(node):
             child = action.child_place(node.place)
@@ -162,8 +210,21 @@ class Search:
                 positions[action.patch] = np.array(action.target)
             key = action.child_key(node.key)
             h = self.heur.h(key, positions, node.extra.get("frame"))
-            f = self.heur.f(node.g + STEP_COST, h, key)
-            heapq.heappush(self._open, (f, next(self._count), node, action, child))
+            recent = action.kind == "remove" and _age(node, action.patch) < RECENT
+            cost = self.heur.cost(node.h, h, recent)
+            g = node.g + cost
+            ahead = self._ahead(node, action, key, h) if action.kind == "remove" else h
+            entry = _Entry(
+                g + self.heur.bound(key),
+                self.heur.f(g, ahead, key),
+                node.depth + 1,
+                next(self._count),
+                node,
+                action,
+                child,
+                cost,
+            )
+            self._open.append(entry)
 
     def _actions(self, node: Node) -> list[Action]:
         """Remove any contact (keeping min_contacts), or add a free patch on an allowed
@@ -176,18 +237,45 @@ class Search:
             ]
         if len(on) >= self.rules.max_contacts:
             return out
-        soles = [node.positions[p] for p in on if "sole" in p] or [node.positions[p] for p in on]
         for p in self.rules.movable():
             if p in on:
                 continue
-            rule = self.rules.patches[p]
-            for s, region in self.heur.areas.items():
-                if not rule.allows(s):
+            for s, target in self._placements(node.key, node.positions, p):
+                if self._undo(node, p, s, target) or _revisits(node, p, s, target):
                     continue
-                target = pick_target(region, self.heur.spots[p], soles, rule.reach)
-                if target is not None and not self._undo(node, p, s, target):
-                    out.append(Action("add", p, s, tuple(float(v) for v in target)))
+                out.append(Action("add", p, s, tuple(float(v) for v in target)))
         return out
+
+    def _placements(
+        self, key: Key, positions: Mapping[str, np.ndarray], patch: str
+    ) -> list[tuple[str, np.ndarray]]:
+        """(surface, target (3,) [m]) of each allowed surface with a point within the
+        patch's reach of the soles in contact (of any contact without soles), the point
+        nearest the patch's goal spot."""
+        on = dict(key)
+        anchors = [positions[p] for p in on if "sole" in p] or [positions[p] for p in on]
+        rule = self.rules.patches[patch]
+        out = []
+        for s, region in self.heur.areas.items():
+            if rule.allows(s):
+                target = pick_target(region, self.heur.spots[patch], anchors, rule.reach)
+                if target is not None:
+                    out.append((s, target))
+        return out
+
+    def _ahead(self, node: Node, action: Action, key: Key, h: float) -> float:
+        """A removal's h for the focal order: the least h of the stance after the patch's
+        best next placement (not back where it was), else h (a removal frees a patch to
+        move: this ranks the removals by the progress they allow)."""
+        positions, frame = node.positions, node.extra.get("frame")
+        best = h
+        for s, target in self._placements(key, positions, action.patch):
+            gap = float(np.linalg.norm(target - positions[action.patch]))
+            if s == action.surface and gap < REVISIT or _revisits(node, action.patch, s, target):
+                continue
+            moved = {**positions, action.patch: target}
+            best = min(best, self.heur.h(key | {(action.patch, s)}, moved, frame))
+        return best
 
     @staticmethod
     def _undo(node: Node, patch: str, surface: str, target: np.ndarray | None = None) -> bool:
@@ -198,14 +286,16 @@ class Search:
             return False
         return a.kind == "add" or target is None or cell(target) == cell(node.positions[patch])
 
-    def _evaluate(self, round_: list[tuple[Node, Action]]) -> list[Node]:
-        """Solve the round's transitions (touch or unload, then the holds): the new nodes."""
+    def _evaluate(self, round_: list[tuple[Node, Action]], costs: list[float]) -> list[Node]:
+        """Solve the round's transitions (touch or unload, then the holds): the new nodes
+        (``costs``: each transition's [m])."""
         if not round_:
             return []
         self.stats.tried += len(round_)
         first = [self._build(n, a, None) for n, a in round_]
         answers = self._solve(first)
-        self._soft_unloads(round_, first, answers)
+        if self.rules.release == "unload":
+            self.stats.unloads += sum(a.kind == "remove" for _, a in round_)
         holds: list[tuple[int, tuple[str, dict[str, Any], Any] | None]] = []
         for i, ((node, action), built, answer) in enumerate(
             zip(round_, first, answers, strict=True)
@@ -219,41 +309,19 @@ class Search:
             stages = [(first[i], answers[i])]
             if i in hold_of:
                 stages.append(hold_of[i])
-            child = self._child(node, action, stages)
+            child = self._child(node, action, stages, costs[i])
             if child is not None:
                 nodes.append(child)
         return nodes
 
-    def _soft_unloads(
-        self, round_: list[tuple[Node, Action]], first: list[Any], answers: list[Any]
-    ) -> None:
-        """Exact unloads that failed, solved again as soft ones (in place)."""
-        if self.rules.release != "unload":
-            return
-        removes = [i for i, (_, a) in enumerate(round_) if a.kind == "remove" and first[i]]
-        self.stats.unloads += len(removes)
-        failed = [i for i in removes if not getattr(answers[i], "success", False)]
-        if not failed:
-            return
-        soft = [self._build(*round_[i], None, soft_unload_stage) for i in failed]
-        for i, b, a in zip(failed, soft, self._solve(soft), strict=True):
-            if b is not None:
-                first[i], answers[i] = b, a
-                self.stats.unload_fallbacks += 1
-
     def _build(
-        self,
-        node: Node,
-        action: Action,
-        touch: tuple[Any, Result] | None,
-        release: Callable[..., dict[str, Any]] | None = None,
+        self, node: Node, action: Action, touch: tuple[Any, Result] | None
     ) -> tuple[str, dict[str, Any], Any] | None:
         """(stage name, problem dict, Problem) of a transition's next posture, None when it
         cannot be built (said in the failures)."""
         try:
             if action.kind == "remove":
-                if release is None:
-                    release = lift_stage if self.rules.release == "lift" else unload_stage
+                release = lift_stage if self.rules.release == "lift" else unload_stage
                 data = release(self.seq, node, action, self.heur.goal)
             elif touch is None:
                 data = touch_stage(self.seq, node, action, self.rules, self.heur.goal)
@@ -271,28 +339,13 @@ class Search:
         self.stats.postures = self.solver.solved
         return [next(answers) if b is not None else None for b in built]
 
-    def _child(self, node: Node, action: Action, stages: list[tuple[Any, Any]]) -> Node | None:
+    def _child(
+        self, node: Node, action: Action, stages: list[tuple[Any, Any]], cost: float
+    ) -> Node | None:
         """The node of a transition whose postures were all verified, else None (cached as
-        failed, with the diagnosis of the posture that failed)."""
-        done = []
-        for k, (built, answer) in enumerate(stages):
-            if built is not None and isinstance(answer, Result) and answer.success:
-                done.append(Stage(built[0], built[1], built[2], answer))
-                continue
-            if built is not None:
-                self.stats.failed_problems.append((built[0], built[1]))
-                why = f"{built[0]}: {_why(answer)}"
-            else:
-                why = f"{action.label()}: its problem could not be built"
-            if k == 0:
-                if built is not None:  # else _build said why
-                    self._fail(node, action, why)
-                return None
-            # the hold failed (IPOPT can stall where the touch left links close): the touch
-            # posture, verified, stands for the stance, its new contact unloaded
-            self.stats.hold_fallbacks += 1
-            if self.progress:
-                self.progress(self.stats, None, f"hold not verified, touch kept: {why}")
+        failed, with the diagnosis of the posture that failed); ``cost`` [m] of the
+        transition."""
+        done = self._verified(node, action, stages)
         if not done:
             return None
         key = action.child_key(node.key)
@@ -301,6 +354,11 @@ class Search:
         place = place_of(key, positions)
         if self._closed(place):
             return None
+        if action.kind == "add" and _revisits(
+            node, action.patch, action.surface, positions[action.patch]
+        ):
+            self._fail(node, action, "the patch came back to a place it left")
+            return None
         self.holds[place] = self.holds.get(place, 0) + 1
         contacts = dict(node.contacts)
         if action.kind == "add":
@@ -308,7 +366,7 @@ class Search:
         else:
             contacts.pop(action.patch)
         frame = frame_position(self.heur.goal.frame, done[-1].result.q, robot)
-        g = node.g + STEP_COST
+        g = node.g + cost
         child = Node(
             key,
             contacts,
@@ -326,6 +384,31 @@ class Search:
             self.progress(self.stats, child, "held " + action.label())
         return child
 
+    def _verified(self, node: Node, action: Action, stages: list[tuple[Any, Any]]) -> list[Stage]:
+        """The verified stages of a transition ([] when its first failed: the transition
+        cached as failed with its diagnosis); a failed hold leaves the touch to stand for the
+        stance."""
+        done: list[Stage] = []
+        for k, (built, answer) in enumerate(stages):
+            if built is not None and isinstance(answer, Result) and answer.success:
+                done.append(Stage(built[0], built[1], built[2], answer))
+                continue
+            if built is not None:
+                self.stats.failed_problems.append((built[0], built[1]))
+                why = f"{built[0]}: {_why(answer)}"
+            else:
+                why = f"{action.label()}: its problem could not be built"
+            if k == 0:
+                if built is not None:  # else _build said why
+                    self._fail(node, action, why)
+                return []
+            # the hold failed (IPOPT can stall where the touch left links close): the touch
+            # posture, verified, stands for the stance, its new contact unloaded
+            self.stats.hold_fallbacks += 1
+            if self.progress:
+                self.progress(self.stats, None, f"hold not verified, touch kept: {why}")
+        return done
+
     def _fail(self, node: Node, action: Action, why: str) -> None:
         self.failed.add((node.place, action))
         self.stats.failures.append(
@@ -333,6 +416,33 @@ class Search:
         )
         if self.progress:
             self.progress(self.stats, None, f"failed {action.label()}: {why}")
+
+
+def _age(node: Node, patch: str) -> int:
+    """Transitions since the patch's contact was placed (a large number: held from the
+    start)."""
+    age = 0
+    n: Node | None = node
+    while n is not None and n.action is not None:
+        if n.action.patch == patch and n.action.kind == "add":
+            return age
+        age += 1
+        n = n.parent
+    return 1 << 30
+
+
+def _revisits(node: Node, patch: str, surface: str, target: np.ndarray) -> bool:
+    """The patch would be placed within REVISIT of where it was on the surface before a
+    transition of the path took it off."""
+    n: Node | None = node
+    while n is not None and n.parent is not None:
+        a = n.action
+        if a is not None and a.kind == "remove" and (a.patch, a.surface) == (patch, surface):
+            left = n.parent.positions[patch]
+            if float(np.linalg.norm(np.asarray(target) - left)) < REVISIT:
+                return True
+        n = n.parent
+    return False
 
 
 def _why(answer: Any) -> str:

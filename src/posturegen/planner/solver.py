@@ -4,7 +4,9 @@ builds each solver structure once."""
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
 
@@ -18,12 +20,48 @@ from ..solver.problem import Problem
 from ..solver.solve import Result, solve
 
 
+@dataclass
+class Timing:
+    """Where the postures' time went [s]: ``rounds_s`` the wall time of the rounds (a round
+    solved on several workers counts once); the others summed over the postures (across
+    workers): the solvers' runs, the builds of their programs, the re-checks, and the rest
+    of the calls (active-set rounds' scans, outputs)."""
+
+    rounds_s: float = 0.0
+    solver_s: float = 0.0
+    build_s: float = 0.0
+    verify_s: float = 0.0
+    calls_s: float = 0.0
+
+    def add(self, answers: Sequence[Result | BatchError], wall: float) -> None:
+        """Count one round's answers, solved in ``wall`` [s]."""
+        self.rounds_s += wall
+        for r in answers:
+            if isinstance(r, Result):
+                self.solver_s += r.solve_time_s
+                self.build_s += r.build_time_s
+                self.verify_s += r.verify_time_s
+                self.calls_s += r.wall_time_s
+
+    def to_dict(self) -> dict[str, float]:
+        """The times [s], rounded to ms, with ``other_s``: the calls' rest."""
+        other = self.calls_s - self.solver_s - self.build_s - self.verify_s
+        return {
+            "rounds_s": round(self.rounds_s, 3),
+            "solver_s": round(self.solver_s, 3),
+            "build_s": round(self.build_s, 3),
+            "verify_s": round(self.verify_s, 3),
+            "other_s": round(max(0.0, other), 3),
+        }
+
+
 class RoundSolver:
-    """Solves lists of problem dicts; counts the postures it solved."""
+    """Solves lists of problem dicts; counts the postures it solved and their time."""
 
     def __init__(self, workers: int = 1) -> None:
         self.workers = max(1, int(workers))
         self.solved = 0
+        self.timing = Timing()
         self._pool: LocalBackend | RayBackend | None = None
 
     def __enter__(self) -> RoundSolver:
@@ -47,9 +85,16 @@ class RoundSolver:
         self, datas: Sequence[dict[str, Any]], problems: Sequence[Problem]
     ) -> list[Result | BatchError]:
         """Each problem's answer, in order (``problems``: the same, already built here)."""
+        t0 = time.perf_counter()
         self.solved += len(datas)
         if self.workers == 1 or len(datas) == 1 and self._pool is None:
-            return [self._here(p) for p in problems]
+            out = [self._here(p) for p in problems]
+        else:
+            out = self._pooled(datas)
+        self.timing.add(out, time.perf_counter() - t0)
+        return out
+
+    def _pooled(self, datas: Sequence[dict[str, Any]]) -> list[Result | BatchError]:
         if self._pool is None:
             self._pool = open_backend("local", self.workers)
         answers: dict[int, Result | BatchError] = {}

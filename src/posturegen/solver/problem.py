@@ -58,9 +58,9 @@ class SolverOptions:
     print_level: int = 0
     # Generated C for the program's functions (posturegen.solver.codegen): "auto" compiles a
     # structure before its first solve and loads it from the disk cache in later sessions
-    # ("sync": the same), "background" compiles while the virtual machine solves, "off" keeps
-    # CasADi's virtual machine; None: $POSTUREGEN_CODEGEN, else "auto". Without a C
-    # compiler: "off".
+    # ("sync": the same), "background" compiles while the virtual machine solves, "cached"
+    # uses a library only when on disk, "off" keeps CasADi's virtual machine; None:
+    # $POSTUREGEN_CODEGEN, else "auto". Without a C compiler: "off".
     codegen: str | None = None
     # the same as codegen="sync" (compile before the first solve; kept for problem files)
     jit: bool = False

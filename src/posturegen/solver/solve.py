@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 import dataclasses
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -81,6 +82,8 @@ class Result:
     # of each solver over the call's runs
     method: str = "ipopt"
     iterations_by_method: dict[str, int] = dataclasses.field(default_factory=dict)
+    verify_time_s: float = 0.0  # the re-check of the returned posture [s]
+    wall_time_s: float = 0.0  # the whole call: builds, runs, active-set rounds, re-checks [s]
 
     @property
     def max_violation(self) -> float:
@@ -160,11 +163,13 @@ def solve(problem: Problem, x0: np.ndarray | None = None, start: Solved | None =
         A frozen :class:`Result`: ``success`` (re-checked on Pinocchio and the meshes), ``q``
         (nq,) [m, quaternion xyzw, rad], ``torques`` (nj,) [N·m], ``forces`` per contact
         [N at points in m], ``status``, ``iterations``, timings [s], ``verification``."""
+    t0 = time.perf_counter()
     token = BUDGET.set(Budget(problem.solver_options.max_call_iter))
     try:
-        return _solve(problem, x0, start)
+        result = _solve(problem, x0, start)
     finally:
         BUDGET.reset(token)
+    return dataclasses.replace(result, wall_time_s=time.perf_counter() - t0)
 
 
 def _solve(problem: Problem, x0: np.ndarray | None, start: Solved | None) -> Result:
@@ -183,9 +188,31 @@ def _solve(problem: Problem, x0: np.ndarray | None, start: Solved | None) -> Res
     relaxed = program.but(torque_limit_scale=program.torque_limit_scale * TORQUE_CONTINUATION)
     _, relaxed_runs = _solve_continued(relaxed, x_start, runs)
     if relaxed_runs[-1].status not in _IPOPT_OK:
-        return result
-    retry, _ = _solve_continued(program, relaxed_runs[-1].x, relaxed_runs)
-    return retry if retry.success else result
+        return _counted(result, relaxed_runs)
+    retry, retry_runs = _solve_continued(program, relaxed_runs[-1].x, relaxed_runs)
+    return retry if retry.success else _counted(result, retry_runs)
+
+
+def _counted(result: Result, runs: list[Run]) -> Result:
+    """``result`` with the iterations and times of every run of the call (those of the
+    continuations that did not succeed too), in its posture's fields as well."""
+    iterations = sum(r.iterations for r in runs)
+    solve_time = sum(r.solve_time_s for r in runs)
+    result.posture.update(
+        {"iterations": iterations, "solve_time_s": solve_time, "ipopt_runs": len(runs)}
+    )
+    return dataclasses.replace(
+        result,
+        iterations=iterations,
+        solve_time_s=solve_time,
+        build_time_s=sum(r.build_time_s for r in runs),
+        iterations_by_method=_by_method(runs),
+    )
+
+
+def _by_method(runs: list[Run]) -> dict[str, int]:
+    """Iterations of the runs per solver method."""
+    return {m: sum(r.iterations for r in runs if r.method == m) for m in {r.method for r in runs}}
 
 
 def _outputs(run: Run) -> dict[str, np.ndarray]:
@@ -226,7 +253,7 @@ def _solve_continued(
         return result, runs
     relaxed = run_nlp(_without_rows(program), x_start)
     if not relaxed[-1].ok:
-        return result, [*runs, *relaxed]
+        return _counted(result, [*runs, *relaxed]), [*runs, *relaxed]
     return _solve_avoiding(program, relaxed[-1].x, [*runs, *relaxed])
 
 
@@ -418,7 +445,9 @@ def _result(program: Program, runs: list[Run], margin: float | None = None) -> R
     torques = outputs["torques"]
     posture = posture_dict(program, q, torques, outputs, margin)
     geometry = program.robot.collision_model() if program.collision_options is not None else None
+    t_verify = time.perf_counter()
     report = verify_posture(posture, program.robot.model, geometry)
+    verify_time = time.perf_counter() - t_verify
     status = run.status
     success = status in _IPOPT_OK and report.ok
     message = _message(status, report, run.method)
@@ -458,9 +487,8 @@ def _result(program: Program, runs: list[Run], margin: float | None = None) -> R
         lam_x=np.zeros(0) if run.lam_x is None else run.lam_x,
         lam_g=per_block(run),
         method=run.method,
-        iterations_by_method={
-            m: sum(r.iterations for r in runs if r.method == m) for m in {r.method for r in runs}
-        },
+        iterations_by_method=_by_method(runs),
+        verify_time_s=verify_time,
     )
 
 
