@@ -336,7 +336,7 @@ def _bench_plans(args: argparse.Namespace, names: list[str]) -> int:
     if others:
         raise PosturegenError(f"--family: {others[0]} is not a plan family (--plans runs those)")
     before = machine_line()
-    print(f"plans, each cold (an empty cache) then warm, default budgets: {before}")
+    print(f"plans, each cold (an empty cache), compiling, then warm; default budgets: {before}")
     reports = []
     for name in names:
         reports.append(run_plan_family(name))
