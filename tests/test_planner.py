@@ -21,11 +21,11 @@ from posturegen.model.robot import load_bundled
 from posturegen.model.scene import Surface
 from posturegen.planner import Budget, Goal, default_rules, parse_goal, parse_rules
 from posturegen.planner.command import write_figures
-from posturegen.planner.heuristic import STEP_COST, Heuristic
+from posturegen.planner.heuristic import FOCAL, STEP_COST, Heuristic
 from posturegen.planner.layout import Region, pick_target
 from posturegen.planner.node import Action, Node
 from posturegen.planner.rules import is_hand, patch_positions
-from posturegen.planner.search import REVISIT, Search
+from posturegen.planner.search import REVISIT, Search, _Entry
 from posturegen.planner.solver import RoundSolver
 from posturegen.verify import verify_posture
 
@@ -304,6 +304,23 @@ def test_successors_follow_the_rules_and_never_undo(on, kind, reach):
             assert not is_hand(a.patch)
             d = min(np.linalg.norm(np.array(a.target) - positions[p]) for p in on)
             assert d <= reach + 1e-9
+
+
+def test_the_focal_list_keeps_the_bound_then_orders_by_distance():
+    """Open: A (g + bound 0.2, order 5), B (0.5, 1), C (0.7, 0.5). With FOCAL 3 the first
+    pick is B (the best order within 3 × 0.2), not C (best order, beyond the bound); then A
+    (C still beyond); then C."""
+    rules = default_rules(load_bundled("atlas"), SURFACES)
+    search = _search_on_steps(rules)
+    node = Node(frozenset({("left_sole", "ground")}), {}, (), {p: np.zeros(3) for p in PATCHES})
+    action = Action("remove", "left_sole", "ground")
+    for name, bounded, order in (("A", 0.2, 5.0), ("B", 0.5, 1.0), ("C", 0.7, 0.5)):
+        child = frozenset({(name, "ground", (0, 0, 0))})
+        entry = _Entry(bounded, order, 1, next(search._count), node, action, child, 0.05)
+        search._open.append(entry)
+    assert FOCAL == 3.0
+    picks = [next(iter(search._pop_focal(set()).child))[0] for _ in range(3)]
+    assert picks == ["B", "A", "C"] and search._pop_focal(set()) is None
 
 
 def test_no_add_puts_a_patch_back_where_the_path_took_it_off():
