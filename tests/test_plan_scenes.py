@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from posturegen import clear_caches, plan
+from posturegen import plan
 from posturegen.io.problem_file import read_yaml
 from posturegen.model.robot import load_bundled
 from posturegen.planner import Budget
@@ -18,18 +18,6 @@ from posturegen.verify import verify_posture
 
 PLANS = Path(__file__).resolve().parent.parent / "examples" / "plans"
 SCENES = ["platform", "stepping_stones", "beam", "high_step", "hrp2_platform", "ladder_platform"]
-
-
-@pytest.fixture(autouse=True)
-def _caches_of_its_own():
-    """Each plan starts from, and leaves, empty in-process caches: what these plans left
-    (learned active sets, separated starts, stance caps) made HRP-2's scripted vertical ladder
-    fail at 'left foot on rung 2' when it ran after them in one process (it passes alone and
-    after clearing them). That dependence on history is a solver defect (the note of
-    2026-12-04), not something this test should pass on to the tests after it."""
-    clear_caches()
-    yield
-    clear_caches()
 
 
 @pytest.mark.parametrize("name", SCENES)

@@ -71,6 +71,10 @@ def separated_start(
     q = np.array(q, dtype=float)
     if movable.size == 0 or len(links) == 0:
         return q[7:]  # nothing to part: not worth a cache entry
+    # the base at the origin: the result is a function of the key alone (computed at another
+    # base pose, rounding moved a borderline pair and the start by ~1e-15, and a later stage
+    # of HRP-2's vertical ladder failed after plans that had filled this cache)
+    q[:7] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
     held = pm.pair_clearance(margin)  # (P,) pairs tighter at the reference are left there
     target = np.where(pm.clearance < margin, held, held + SEPARATION)
     for _ in range(SEPARATION_STEPS):
