@@ -71,10 +71,7 @@ def separated_start(
     q = np.array(q, dtype=float)
     if movable.size == 0 or len(links) == 0:
         return q[7:]  # nothing to part: not worth a cache entry
-    # the base at the origin: the result is a function of the key alone (computed at another
-    # base pose, rounding moved a borderline pair and the start by ~1e-15, and a later stage
-    # of HRP-2's vertical ladder failed after plans that had filled this cache)
-    q[:7] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+    q[:7] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)  # the base at the origin: see _SEPARATED
     held = pm.pair_clearance(margin)  # (P,) pairs tighter at the reference are left there
     target = np.where(pm.clearance < margin, held, held + SEPARATION)
     for _ in range(SEPARATION_STEPS):
@@ -121,5 +118,9 @@ def _pair_gradient(
     return grad
 
 
-# separated starts per (model, q, margin, contacts, links): a planner's queries share them
+# separated starts per (model, q's joints, margin, contacts, links): a planner's queries share
+# them. Computed with the base at the origin, a start is a function of its key alone: computed
+# at each problem's base pose, rounding moved a borderline pair and a cached start differed by
+# ~1e-15 from the one the next problem would compute, and a stage of HRP-2's vertical ladder
+# failed after plans had filled the cache (tests/test_separation_key.py)
 _SEPARATED: BoundedCache[np.ndarray] = BoundedCache("separated starts", 64)
