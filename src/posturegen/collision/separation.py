@@ -51,8 +51,7 @@ def separated_start(
     SEPARATED_PER_LINK closest sphere pairs, b their shortfalls; clipped to the joint limits.
 
     IPOPT starts there instead of at q (the posture cost still pulls towards q). In
-    half-sitting Talos' forearms are 4 mm above the 1 cm margin from its thighs, and the first
-    steps towards a target near the body were cut to a few percent by those rows:
+    half-sitting Talos' forearms are 4 mm above the 1 cm margin from its thighs:
     talos-near-body-collision took 26.5 and 24.5 median iterations (two seeds), 25.0 and 23.5
     from the separated start, 22.5 and 21.0 with it and COLLISION_MU_INIT = 1e-3."""
     key = (  # the base pose moves no self distance: q's joints only
