@@ -1,7 +1,7 @@
-"""The separated start is a function of its cache key: q's joints, not the base pose. Computed
-at another base pose, rounding moved a borderline pair, and the cached start of one problem
-differed (by ~1e-15) from the start a later problem with the same joints computed for itself;
-a stage of HRP-2's vertical ladder failed after plans had filled the cache."""
+"""A cached separated start is the one its problem computes. Keyed on q's joints alone (the
+base pose moves no self distance), the start cached by one problem differed by ~1e-15 from
+the one a later problem with the same joints computed at its own base pose (rounding moved a
+borderline pair); a stage of HRP-2's vertical ladder failed after plans had filled the cache."""
 
 from __future__ import annotations
 
@@ -39,19 +39,27 @@ def _problem(x: float, yaw: float):
     )
 
 
-def test_the_separated_start_does_not_depend_on_the_base_pose():
-    """The same joints at three base poses, each computed with an empty cache: the same
-    joints out, bit for bit."""
-    outs = []
-    for x, yaw in ((0.0, 0.0), (1.3, 0.7), (-2.1, -2.5)):
-        clear_caches()
+def test_a_cached_separated_start_is_the_one_its_problem_computes():
+    """The same joints at three base poses: each start, computed after the others filled the
+    cache, is bit for bit the one computed with an empty cache."""
+    poses = ((0.0, 0.0), (1.3, 0.7), (-2.1, -2.5))
+
+    def start(x: float, yaw: float) -> np.ndarray:
         program = Program.of(_problem(x, yaw))
         active = ActiveSet.of(program)
         q = program.q_init.copy()
         q[7:] = pin.neutral(program.robot.model)[7:] + 0.3  # joints bent: pairs to part
         q[7:] = np.clip(q[7:], program.robot.q_lower, program.robot.q_upper)
         joints = [c.patch.joint_id for c in program.contacts]
-        outs.append(separated_start(program.robot, active.pm, active.links, 0.005, q, joints))
-    assert np.any(outs[0] != q[7:])  # it moved something (a property that could fail)
-    for out in outs[1:]:
-        assert np.array_equal(out, outs[0])
+        out = separated_start(program.robot, active.pm, active.links, 0.005, q, joints)
+        assert np.any(out != q[7:])  # it moved something
+        return out
+
+    alone = []
+    for pose in poses:
+        clear_caches()
+        alone.append(start(*pose))
+    clear_caches()
+    after = [start(*pose) for pose in poses]  # each after the ones before it, cached
+    for a, b in zip(alone, after, strict=True):
+        assert np.array_equal(a, b)

@@ -54,9 +54,9 @@ def separated_start(
     half-sitting Talos' forearms are 4 mm above the 1 cm margin from its thighs:
     talos-near-body-collision took 26.5 and 24.5 median iterations (two seeds), 25.0 and 23.5
     from the separated start, 22.5 and 21.0 with it and COLLISION_MU_INIT = 1e-3."""
-    key = (  # the base pose moves no self distance: q's joints only
+    key = (  # all of q: see _SEPARATED
         Ref(robot.model),
-        np.asarray(q, dtype=float)[7:].tobytes(),
+        np.asarray(q, dtype=float).tobytes(),
         margin,
         tuple(contact_joints),
         hashlib.sha1(np.asarray(links).tobytes()).digest(),
@@ -70,7 +70,6 @@ def separated_start(
     q = np.array(q, dtype=float)
     if movable.size == 0 or len(links) == 0:
         return q[7:]  # nothing to part: not worth a cache entry
-    q[:7] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)  # the base at the origin: see _SEPARATED
     held = pm.pair_clearance(margin)  # (P,) pairs tighter at the reference are left there
     target = np.where(pm.clearance < margin, held, held + SEPARATION)
     for _ in range(SEPARATION_STEPS):
@@ -117,9 +116,9 @@ def _pair_gradient(
     return grad
 
 
-# separated starts per (model, q's joints, margin, contacts, links): a planner's queries share
-# them. Computed with the base at the origin, a start is a function of its key alone: computed
-# at each problem's base pose, rounding moved a borderline pair and a cached start differed by
-# ~1e-15 from the one the next problem would compute, and a stage of HRP-2's vertical ladder
-# failed after plans had filled the cache (tests/test_separation_key.py)
+# separated starts per (model, q, margin, contacts, links). The base pose moves no self
+# distance, but keyed on q's joints alone a start cached by one problem differed by ~1e-15
+# (rounding moved a borderline pair) from what the next problem with the same joints computed,
+# and a stage of HRP-2's vertical ladder failed after plans had filled the cache: keyed on all
+# of q, a start is what its problem computes (tests/test_separation_key.py)
 _SEPARATED: BoundedCache[np.ndarray] = BoundedCache("separated starts", 64)
