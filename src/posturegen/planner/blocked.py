@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 from .heuristic import Heuristic
-from .layout import pick_target
+from .layout import anchor_points, pick_target
 from .node import Node
 from .rules import Rules
 
@@ -53,8 +53,7 @@ def _why_not(
     if tried:
         return "failed: " + tried[-1]
     on = dict(node.key)
-    anchors = [node.positions[p] for p in on if "sole" in p and p != patch]
-    anchors = anchors or [node.positions[p] for p in on if p != patch]
+    anchors = anchor_points([x for x in node.key if x[0] != patch], node.positions)
     region = heur.areas[surface]
     if anchors and pick_target(region, heur.spots[patch], anchors, rule.reach) is None:
         d = min(region.distance(a) for a in anchors)

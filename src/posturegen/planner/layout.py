@@ -3,7 +3,7 @@ surface nearest a goal spot within a patch's reach, and the goal spot of every p
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,6 +72,15 @@ class Region:
 def regions(scene: Scene) -> dict[str, Region]:
     """Every surface of the scene as a Region."""
     return {name: Region.of(s) for name, s in scene.surfaces.items()}
+
+
+def anchor_points(
+    key: Iterable[tuple[str, str]], positions: Mapping[str, np.ndarray]
+) -> list[np.ndarray]:
+    """Where a patch's reach is measured from: the soles in contact of the stance ``key``
+    ((patch, surface) pairs), or every contact when none is a sole; positions (3,) [m]."""
+    on = [p for p, _ in key]
+    return [positions[p] for p in on if "sole" in p] or [positions[p] for p in on]
 
 
 def pick_target(

@@ -26,7 +26,7 @@ from ..model.robot import Robot
 from ..solver.solve import Result
 from .blocked import blocked_lines
 from .heuristic import FOCAL, RECENT, Heuristic
-from .layout import pick_target
+from .layout import anchor_points, pick_target
 from .node import Action, Key, Node, Place, Stage, cell, place_of
 from .rules import Rules, patch_positions
 from .solver import RoundSolver
@@ -252,8 +252,7 @@ class Search:
         """(surface, target (3,) [m]) of each allowed surface with a point within the
         patch's reach of the soles in contact (of any contact without soles), the point
         nearest the patch's goal spot."""
-        on = dict(key)
-        anchors = [positions[p] for p in on if "sole" in p] or [positions[p] for p in on]
+        anchors = anchor_points(key, positions)
         rule = self.rules.patches[patch]
         out = []
         for s, region in self.heur.areas.items():
