@@ -17,7 +17,15 @@ from posturegen.planner import Budget
 from posturegen.verify import verify_posture
 
 PLANS = Path(__file__).resolve().parent.parent / "examples" / "plans"
-SCENES = ["platform", "stepping_stones", "beam", "high_step", "hrp2_platform", "ladder_platform"]
+SCENES = [
+    "platform",
+    "stepping_stones",
+    "beam",
+    "high_step",
+    "rail_step",
+    "hrp2_platform",
+    "ladder_platform",
+]
 
 
 @pytest.mark.parametrize("name", SCENES)
@@ -48,3 +56,19 @@ def test_a_scene_of_our_own_is_planned_and_every_posture_verified(name, tmp_path
     for before, after in zip(places, places[1:], strict=False):
         assert not (after - before) & left, (before, after)
         left |= before - after
+
+
+def test_a_step_too_high_for_the_legs_alone_ends_with_what_blocked_it(tmp_path):
+    """rail_step without its rules (no hands): the lower sole's unload is never found, and
+    the plan ends unreached, naming the best stance and the unload that kept the goal."""
+    report = plan(
+        str(PLANS / "rail_step.yaml"),
+        tmp_path,
+        goal=str(PLANS / "rail_step.goal.yaml"),
+        budget=Budget(nodes=30),
+    )
+    assert not report.success
+    summary = report.summary
+    assert summary["stop"] == "no transition left to try"
+    assert "right_hand" not in summary["best"]  # the legs alone
+    assert any("unload" in line for line in summary["blocked"]), summary["blocked"]
