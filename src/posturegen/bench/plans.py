@@ -52,9 +52,7 @@ PLAN_FAMILIES: dict[str, PlanFamily] = {
     "plan-stepping-stones-talos": PlanFamily("Talos, three stepping stones", "stepping_stones"),
     "plan-beam-talos": PlanFamily("Talos, a beam narrower than the sole", "beam"),
     "plan-high-step-talos": PlanFamily("Talos, a step 45 cm high", "high_step"),
-    "plan-rail-step-talos": PlanFamily(
-        "Talos, a step 50 cm high, a hand on a rail", "rail_step"
-    ),
+    "plan-rail-step-talos": PlanFamily("Talos, a step 50 cm high, a hand on a rail", "rail_step"),
     "plan-platform-hrp2": PlanFamily("HRP-2, a platform aside and turned", "hrp2_platform"),
     "plan-ladder-platform-hrp2": PlanFamily(
         "HRP-2, a rung then a platform 40 cm up", "ladder_platform"
