@@ -41,6 +41,25 @@ def test_the_registry_holds_the_five_types_and_the_schema_follows_it():
         assert own == set(types[kind].keys)
 
 
+def test_a_type_of_your_own_brings_its_keys_schemas(monkeypatch):
+    """A registered type's keys carry their value's JSON Schema: a user's new key is in the
+    problem file's schema as the type declares it (no table elsewhere to extend)."""
+    from posturegen.terms.contacts import base
+
+    pad = {"type": "number", "minimum": 0, "description": "pad thickness [m]"}
+
+    @dataclass
+    class Padded(FixedContact):
+        kind: ClassVar[str] = "padded"
+        keys: ClassVar = {**FixedContact.keys, "pad": pad}
+
+    monkeypatch.setitem(base._CONTACTS._by_kind, "padded", Padded)
+    items = problem_schema()["properties"]["contacts"]["items"]["oneOf"]
+    (mine,) = [i for i in items if i["properties"]["type"]["const"] == "padded"]
+    assert mine["properties"]["pad"] == pad
+    assert mine["properties"]["yaw"] == FixedContact.keys["yaw"]
+
+
 def test_a_key_of_another_type_is_named_as_such():
     data = copy.deepcopy(STAND)
     data["contacts"][1]["points"] = 6  # a support contact's key

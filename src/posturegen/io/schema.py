@@ -19,6 +19,7 @@ import jsonschema
 from .._fields import read_yaml
 from ..solver import codegen
 from ..terms.contacts import contact_types
+from ..terms.contacts.values import FRICTION
 from ..terms.tasks import task_types
 
 SCHEMA_ID = "https://posturegen.dev/schema/problem.json"
@@ -30,34 +31,6 @@ def _array(n: int, items: dict[str, Any] | None = None) -> dict[str, Any]:
 
 
 _POINTS = {"type": "array", "items": _array(2), "minItems": 3}
-_FRICTION = {
-    "oneOf": [
-        {"const": "cone"},
-        {
-            "type": "object",
-            "properties": {"model": {"enum": ["pyramid", "cone"]}, "faces": {"type": "integer"}},
-            "required": ["model"],
-            "additionalProperties": False,
-        },
-    ]
-}
-# the value of each contact key ([m], [rad], [m²], weights)
-_CONTACT_VALUES: dict[str, dict[str, Any]] = {
-    "position": _array(2),
-    "yaw": _NUMBER,
-    "mu": {"type": "number", "minimum": 0},
-    "friction": _FRICTION,
-    "cop_margin": {"type": "number", "minimum": 0},
-    "formulation": {"enum": ["paper", "support"]},
-    "min_radii": _array(2),
-    "min_area": {"type": "number", "minimum": 0},
-    "maximize_area": {"type": "number", "minimum": 0},
-    "scaling": {"oneOf": [{"enum": ["auto", "none"]}, {"type": "number", "exclusiveMinimum": 0}]},
-    "yaw_range": _array(2),
-    "points": {"type": "integer", "minimum": 3},
-    "point": _array(2),
-    "unloaded": {"type": "boolean"},
-}
 _SURFACE = {
     "type": "object",
     "properties": {
@@ -132,7 +105,7 @@ def _contact(kind: str) -> dict[str, Any]:
             "robot_patch": {"type": "string", "description": "a patch of the robot"},
             "surface": {"type": "string", "description": "a surface of the scene"},
             "name": {"type": "string"},
-            **{k: _CONTACT_VALUES[k] for k in keys},
+            **dict(keys),  # each key with its value's schema (the type's own)
         },
         "required": ["type", "robot_patch", "surface"],
         "additionalProperties": False,
@@ -176,7 +149,7 @@ def problem_schema(user_tasks: bool = True) -> dict[str, Any]:
             "name": {"type": "string"},
             "description": {"type": "string"},
             "mu": {"type": "number", "minimum": 0},
-            "friction": _FRICTION,
+            "friction": FRICTION,
             "surfaces": {"type": "array", "items": _SURFACE},
             "obstacles": {"type": "array", "items": _OBSTACLE},
             "contacts": {

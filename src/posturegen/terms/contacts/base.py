@@ -26,6 +26,7 @@ from ...model.robot import Patch
 from ...model.scene import Surface
 from ..friction import FrictionModel
 from ..nlp import BuildContext, Term
+from . import values as V
 
 
 def patch_in_surface(position: np.ndarray, yaw: float) -> pin.SE3:
@@ -80,12 +81,13 @@ class ContactEntry:
 
 class Contact(Term):
     """A robot patch against a scene surface. A type sets ``kind`` (its ``type`` in files),
-    ``keys`` (the problem-file keys it reads beyond robot_patch, surface, type and name),
+    ``keys`` (the problem-file keys it reads beyond robot_patch, surface, type and name, each
+    with the JSON Schema of its value: posturegen.terms.contacts.values),
     ``fixed_in_place`` (its patch's pose is given, not found: the collision rules hold the
     links it places, the initial posture is placed on it) and writes :meth:`read`."""
 
     kind: ClassVar[str]
-    keys: ClassVar[tuple[str, ...]] = ()
+    keys: ClassVar[Mapping[str, V.Schema]] = {}
     fixed_in_place: ClassVar[bool] = False
 
     type: str

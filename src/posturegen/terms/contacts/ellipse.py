@@ -20,8 +20,6 @@ from ..ellipse_options import EllipseOptions, thin_scaling
 from ..nlp import BuildContext, Instance
 from .floating import FloatingContact
 
-ELLIPSE_KEYS = ("formulation", "min_radii", "min_area", "maximize_area", "scaling")
-
 
 class EllipseContact(FloatingContact):
     """A floating contact with the ellipse variables (x, y, θ, rx, ry) of sec. IV-C, in the

@@ -20,6 +20,7 @@ from ..cop import DEFAULT_COP_MARGIN, check_polygon_margin, declare_polygon_cop,
 from ..forces import declare_forces, force_guess, forces_dict
 from ..friction import FrictionModel
 from ..nlp import BuildContext, Instance
+from . import values as V
 from .base import (
     Contact,
     ContactEntry,
@@ -58,14 +59,14 @@ class FixedContact(Contact):
     unloaded: bool = field(default=False, kw_only=True)
 
     kind: ClassVar[str] = "fixed"
-    keys: ClassVar[tuple[str, ...]] = (
-        "position",
-        "yaw",
-        "mu",
-        "friction",
-        "cop_margin",
-        "unloaded",
-    )
+    keys: ClassVar[Mapping[str, V.Schema]] = {
+        "position": V.POSITION,
+        "yaw": V.YAW,
+        "mu": V.MU,
+        "friction": V.FRICTION,
+        "cop_margin": V.COP_MARGIN,
+        "unloaded": V.UNLOADED,
+    }
     fixed_in_place: ClassVar[bool] = True
 
     def __post_init__(self) -> None:

@@ -12,8 +12,9 @@ from ...model.robot import Patch
 from ...model.scene import Surface
 from ..ellipse_options import EllipseOptions
 from ..nlp import BuildContext, Instance
+from . import values as V
 from .base import Contact, ContactEntry, register_contact
-from .ellipse import ELLIPSE_KEYS, EllipseContact, read_ellipse_options
+from .ellipse import EllipseContact, read_ellipse_options
 
 
 @register_contact
@@ -29,7 +30,7 @@ class GeometricContact(EllipseContact):
     type: str = "geometric"
 
     kind: ClassVar[str] = "geometric"
-    keys: ClassVar[tuple[str, ...]] = (*ELLIPSE_KEYS, "yaw_range")
+    keys: ClassVar[Mapping[str, V.Schema]] = {**V.ELLIPSE, "yaw_range": V.YAW_RANGE}
 
     def __post_init__(self) -> None:
         self._init_scaling()

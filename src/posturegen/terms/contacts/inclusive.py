@@ -12,6 +12,7 @@ import numpy as np
 from ...model.robot import Patch
 from ...model.scene import Surface
 from ..nlp import BuildContext, Instance
+from . import values as V
 from .base import Contact, ContactEntry, PlacedContact, points_in_plane, register_contact
 from .floating import FloatingContact
 
@@ -29,7 +30,7 @@ class InclusiveContact(FloatingContact):
     type: str = "inclusive"
 
     kind: ClassVar[str] = "inclusive"
-    keys: ClassVar[tuple[str, ...]] = ("yaw_range",)
+    keys: ClassVar[Mapping[str, V.Schema]] = {"yaw_range": V.YAW_RANGE}
 
     def key(self) -> tuple[Any, ...]:
         return ("inclusive", self.name, self.patch.name, self.surface.polygon.n, *self._plane_key())

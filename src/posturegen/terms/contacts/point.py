@@ -14,6 +14,7 @@ from ...errors import InputError
 from ...model.robot import Patch
 from ...model.scene import Surface
 from ..nlp import BuildContext, Instance
+from . import values as V
 from .base import Contact, ContactEntry, PlacedContact, points_in_plane, register_contact
 from .floating import FloatingContact
 
@@ -32,7 +33,7 @@ class PointContact(FloatingContact):
     type: str = "point"
 
     kind: ClassVar[str] = "point"
-    keys: ClassVar[tuple[str, ...]] = ("point", "yaw_range")
+    keys: ClassVar[Mapping[str, V.Schema]] = {"point": V.POINT, "yaw_range": V.YAW_RANGE}
 
     def key(self) -> tuple[Any, ...]:
         return ("point", self.name, self.patch.name, self.surface.polygon.n, *self._plane_key())

@@ -18,8 +18,9 @@ from ..ellipse_options import EllipseOptions
 from ..forces import declare_forces, force_guess, forces_dict
 from ..friction import FrictionModel
 from ..nlp import BuildContext, Instance
+from . import values as V
 from .base import Contact, ContactEntry, register_contact
-from .ellipse import ELLIPSE_KEYS, EllipseContact, read_ellipse_options
+from .ellipse import EllipseContact, read_ellipse_options
 
 
 @register_contact
@@ -40,14 +41,14 @@ class SupportContact(EllipseContact):
     cop_margin: float = field(default=DEFAULT_COP_MARGIN, kw_only=True)  # [m]
 
     kind: ClassVar[str] = "support"
-    keys: ClassVar[tuple[str, ...]] = (
-        *ELLIPSE_KEYS,
-        "points",
-        "mu",
-        "friction",
-        "yaw_range",
-        "cop_margin",
-    )
+    keys: ClassVar[Mapping[str, V.Schema]] = {
+        **V.ELLIPSE,
+        "points": V.POINTS,
+        "mu": V.MU,
+        "friction": V.FRICTION,
+        "yaw_range": V.YAW_RANGE,
+        "cop_margin": V.COP_MARGIN,
+    }
 
     def __post_init__(self) -> None:
         if self.points < 4:
