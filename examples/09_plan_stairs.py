@@ -5,8 +5,8 @@ step): each transition adds or removes one contact, each stance is a posture sol
 verified. It writes the sequence (``sequence.json``, a posture file per stage) and
 ``plan.json`` (where the time went); ``write_figures`` adds what ``posturegen plan`` shows:
 ``plan.html`` (the 3-D viewer, a slider over the stances) and ``plan.png`` (a contact sheet).
-ATLAS, stairs of 2 steps. The same from the shell:
-``posturegen plan stairs --robot atlas --steps 2 --out out/plan``.
+TALOS, stairs of 2 steps. The same from the shell:
+``posturegen plan stairs --robot talos --steps 2 --out out/plan``.
 Run: python examples/09_plan_stairs.py [OUT_DIR]
 """
 
@@ -21,7 +21,7 @@ from posturegen.planner.command import write_figures
 
 
 def main(out: Path) -> pg.PlanReport:
-    report = pg.plan("stairs", out, robot="atlas", steps=2, budget=Budget(nodes=20))
+    report = pg.plan("stairs", out, robot="talos", steps=2, budget=Budget(nodes=20))
     assert report.success, report.summary
     for stance in report.summary["stances"]:
         print(stance)

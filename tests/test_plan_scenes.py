@@ -6,6 +6,7 @@ where it was removed from."""
 from __future__ import annotations
 
 import json
+import multiprocessing
 from pathlib import Path
 
 import pytest
@@ -72,3 +73,24 @@ def test_a_step_too_high_for_the_legs_alone_ends_with_what_blocked_it(tmp_path):
     assert summary["stop"] == "no transition left to try"
     assert "right_hand" not in summary["best"]  # the legs alone
     assert any("unload" in line for line in summary["blocked"]), summary["blocked"]
+
+
+def test_two_workers_keep_transitions_in_flight_and_verify_every_posture(tmp_path):
+    """``workers=2``: transitions solved on the pool as they land; the goal reached with
+    every posture verified, and no worker left running once the call returns (the
+    transitions still in flight when the goal held were abandoned)."""
+    start = PLANS / "platform.yaml"
+    report = plan(
+        str(start),
+        tmp_path,
+        goal=str(PLANS / "platform.goal.yaml"),
+        budget=Budget(nodes=30),
+        workers=2,
+    )
+    assert report.success, report.summary.get("stop")
+    robot = load_bundled("talos")
+    index = json.loads((tmp_path / "sequence.json").read_text())
+    for stage in index["stages"]:
+        posture = json.loads((tmp_path / stage["posture"]).read_text())
+        assert stage["success"] and verify_posture(posture, robot.model).ok, stage["name"]
+    assert multiprocessing.active_children() == []

@@ -23,7 +23,7 @@ from posturegen.planner import Budget, Goal, default_rules, parse_goal, parse_ru
 from posturegen.planner.command import write_figures
 from posturegen.planner.heuristic import FOCAL, STEP_COST, Heuristic
 from posturegen.planner.layout import Region, pick_target
-from posturegen.planner.node import Action, Node
+from posturegen.planner.node import FREE, Action, Node, place_of
 from posturegen.planner.rules import is_hand, patch_positions
 from posturegen.planner.search import REVISIT, Search, _Entry
 from posturegen.planner.solver import RoundSolver
@@ -35,12 +35,12 @@ FRAMES = ["base_link", "l_foot"]
 
 
 def test_stairs_plan_reaches_the_top_with_every_stage_verified(tmp_path):
-    """ATLAS, 2 steps, no stage list: both soles end on step 2, every posture re-checked."""
-    report = plan("stairs", tmp_path, robot="atlas", steps=2, budget=Budget(nodes=20))
+    """Talos, 2 steps, no stage list: both soles end on step 2, every posture re-checked."""
+    report = plan("stairs", tmp_path, robot="talos", steps=2, budget=Budget(nodes=20))
     assert report.success and report.stats.reached
     index = json.loads((tmp_path / "sequence.json").read_text())
     assert index["success"] and len(index["stages"]) >= 5
-    robot = load_bundled("atlas")
+    robot = load_bundled("talos")
     for stage in index["stages"]:
         posture = json.loads((tmp_path / stage["posture"]).read_text())
         assert stage["success"] and posture["self_collision"]
@@ -420,3 +420,29 @@ def test_a_bad_posture_budget_is_one_line(tmp_path, capsys):
     code = main(["plan", "stairs", "--budget-iter", "0", "--out", str(tmp_path)])
     err = capsys.readouterr().err.strip()
     assert code == 2 and "budget.posture_iterations" in err and "\n" not in err
+
+
+def test_a_free_patch_is_part_of_the_place_it_left():
+    """A stance's place records where each patch taken off it left: one sole on step 2 with
+    the other lifted from the ground is not the place of the other lifted from step 1 (the
+    next touch is another problem), and placing the patch again forgets where it left."""
+    positions = {
+        "left_sole": np.array([0.5, 0.1, 0.4]),
+        "right_sole": np.array([0.0, -0.1, 0.0]),
+    }
+    key = frozenset({("left_sole", "step2"), ("right_sole", "ground")})
+    start = Node(key, {}, (), positions)
+    off = Action("remove", "right_sole", "ground")
+    left = off.child_left(start.left, positions)
+    assert left == {"right_sole": ("ground", (0, -1, 0))}
+    child = place_of(off.child_key(key), positions, left)
+    assert child == off.child_place(start.place)
+    from_step1 = {**positions, "right_sole": np.array([0.3, -0.1, 0.2])}
+    other = Node(frozenset({("left_sole", "step2"), ("right_sole", "step1")}), {}, (), from_step1)
+    off1 = Action("remove", "right_sole", "step1")
+    assert off1.child_place(other.place) != child  # the same stance, another place
+    on = Action("add", "right_sole", "step2", (0.5, -0.1, 0.4))
+    again = on.child_place(child)
+    assert {p for p, _, _ in again} == {"left_sole", "right_sole"}
+    assert not any(s.startswith(FREE) for _, s, _ in again)
+    assert on.child_left(left, positions) == {}

@@ -24,6 +24,7 @@ from .jobs import BatchItem, Job
 from .worker import WorkerInfo, run_chunk, warm, worker_info
 
 READY_TIMEOUT_S = 600.0  # a worker that is not up and warm by then fails ready()
+ABORT_JOIN_S = 10.0  # [s] abort() waits this long for each terminated worker
 
 _BARRIER: Any = None  # this worker's barrier of ready() (set by _init)
 
@@ -121,3 +122,13 @@ class LocalBackend:
     def close(self) -> None:
         """Stop the workers (waiting for them; queued chunks are cancelled)."""
         self._pool.shutdown(wait=True, cancel_futures=True)
+
+    def abort(self) -> None:
+        """Stop the workers now, their running chunks abandoned (a planner that reached its
+        goal does not wait for the transitions still in flight)."""
+        processes = dict(getattr(self._pool, "_processes", None) or {})  # CPython's pool
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        for process in processes.values():
+            process.terminate()
+        for process in processes.values():
+            process.join(ABORT_JOIN_S)

@@ -173,7 +173,8 @@ def plan(
     ``source``: a shipped scene's name (``stairs``, ``ladder-inclined``, ``ladder-vertical``;
     ``robot`` and ``steps`` as for ``climb``) or a problem (dict or file) whose contacts are
     the start stance; ``goal``/``rules``: dicts or files (posturegen.planner.goal / .rules;
-    a scene has defaults); ``workers`` > 1 solves sibling transitions on the batch pool."""
+    a scene has defaults); ``workers`` > 1 keeps that many transitions in flight on the batch
+    pool (posturegen.planner.search)."""
     t0 = time.perf_counter()
     seq, start_stage, scene_name = _source(source, robot, steps)
     budget = budget or Budget()

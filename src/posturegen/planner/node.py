@@ -3,6 +3,7 @@ it was realized) with the posture that holds it, and the transition that led the
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -12,9 +13,17 @@ from ..solver.problem import Problem
 from ..solver.solve import Result
 
 Key = frozenset[tuple[str, str]]  # (robot patch, surface) of every contact of a stance
-# a stance with where each contact is, to CELL: the search holds each place once
-Place = frozenset[tuple[str, str, tuple[int, int, int]]]
+Cell = tuple[int, int, int]
+# a stance with where each contact is, to CELL, and where each patch taken off it left (its
+# surface marked FREE): the search holds each place once
+Place = frozenset[tuple[str, str, Cell]]
 CELL = 0.1  # [m]
+# a free patch's entry in a place: (patch, FREE + the surface it left, the cell it left). One
+# foot on step 2 with the other lifted from the ground is not the place of the same foot with
+# the other lifted from step 1: from there the next step is another problem (ATLAS' 2-step
+# stairs: the touch of step 2 from the ground spent its 1500 iterations; from step 1 it was
+# never tried while the places were the same, and the plan ended without the goal)
+FREE = "~"
 
 
 def cell(p: np.ndarray) -> tuple[int, int, int]:
@@ -23,9 +32,13 @@ def cell(p: np.ndarray) -> tuple[int, int, int]:
     return i, j, k
 
 
-def place_of(key: Key, positions: dict[str, np.ndarray]) -> Place:
-    """A stance's place: each contact's patch, surface and the cell of the patch."""
-    return frozenset((p, s, cell(positions[p])) for p, s in key)
+def place_of(
+    key: Key, positions: dict[str, np.ndarray], left: Mapping[str, tuple[str, Cell]]
+) -> Place:
+    """A stance's place: each contact's patch, surface and the cell of the patch, and each
+    patch in ``left`` (taken off a surface: (surface, cell) it left) marked FREE."""
+    contacts = {(p, s, cell(positions[p])) for p, s in key}
+    return frozenset(contacts | {(p, FREE + s, c) for p, (s, c) in left.items()})
 
 
 @dataclass(frozen=True)
@@ -48,10 +61,23 @@ class Action:
         return key | {pair} if self.kind == "add" else key - {pair}
 
     def child_place(self, place: Place) -> Place:
-        """The place after this transition (an add's patch at its target's cell)."""
+        """The place after this transition (an add's patch at its target's cell; a removed
+        patch marked FREE where it left)."""
+        others = frozenset(x for x in place if x[0] != self.patch)
         if self.kind == "add" and self.target is not None:
-            return place | {(self.patch, self.surface, cell(np.array(self.target)))}
-        return frozenset(x for x in place if x[0] != self.patch)
+            return others | {(self.patch, self.surface, cell(np.array(self.target)))}
+        was = [c for p, s, c in place if p == self.patch and s == self.surface]
+        return others | {(self.patch, FREE + self.surface, c) for c in was}
+
+    def child_left(
+        self, left: Mapping[str, tuple[str, Cell]], positions: Mapping[str, np.ndarray]
+    ) -> dict[str, tuple[str, Cell]]:
+        """The free patches' last contacts after this transition from a stance whose
+        patches are at ``positions`` (3,) [m]."""
+        out = {p: v for p, v in left.items() if p != self.patch}
+        if self.kind == "remove":
+            out[self.patch] = (self.surface, cell(positions[self.patch]))
+        return out
 
 
 @dataclass(frozen=True)
@@ -79,11 +105,13 @@ class Node:
     action: Action | None = None
     depth: int = 0
     extra: dict[str, Any] = field(default_factory=dict)
+    # each patch taken off a surface on the path and not placed since: (surface, cell) it left
+    left: dict[str, tuple[str, Cell]] = field(default_factory=dict)
 
     @property
     def place(self) -> Place:
-        """The stance with the cell of each contact."""
-        return place_of(self.key, self.positions)
+        """The stance with the cell of each contact and where each free patch left."""
+        return place_of(self.key, self.positions, self.left)
 
     @property
     def last(self) -> Stage:

@@ -1,12 +1,13 @@
 """Focal search over stances (after Escande, Kheddar and Miossec, RAS 2013, the paper's
 ref. [8]; the order in posturegen.planner.heuristic): the open list holds transitions not yet
-tried, with their cost and their child's estimates; each round pops as many as there are
-workers, solves their postures together (posturegen.planner.solver), and pushes the successors
-of the stances that held. A stance is closed once held at a place (its contacts' surfaces and
-their positions to 10 cm: a foot placed further on the same ground is another place); no patch
-is placed back within REVISIT of a place it left on the same surface; a transition that failed
-is never tried again, and its problem is kept (``Stats.failed_problems``) for ``posturegen
-solve`` to diagnose."""
+tried, with their cost and their child's estimates. With one worker, each round pops the
+focal list's first, solves its postures here (posturegen.planner.solver) and pushes the
+successors of the stance if it held; with more, each worker has a transition in flight on the
+pool, and each answer is taken as it lands (the next focal transition sent at once). A stance
+is closed once held at a place (its contacts' surfaces and their positions to 10 cm: a foot
+placed further on the same ground is another place); no patch is placed back within REVISIT
+of a place it left on the same surface; a transition that failed is never tried again, and
+its problem is kept (``Stats.failed_problems``) for ``posturegen solve`` to diagnose."""
 
 from __future__ import annotations
 
@@ -54,6 +55,19 @@ class _Entry:
     action: Action
     child: Place
     cost: float
+
+
+@dataclass
+class _Flight:
+    """A transition on the pool: its posture in flight (``built``: stage name, problem dict,
+    Problem) and the stages already solved, with their answers."""
+
+    node: Node
+    action: Action
+    child: Place
+    cost: float
+    built: tuple[str, dict[str, Any], Any]
+    stages: list[tuple[Any, Any]] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -120,34 +134,108 @@ class Search:
         self.holds: dict[Place, int] = {}
         self.failed: set[tuple[Place, Action]] = set()
         self._open: list[_Entry] = []
+        self._t0 = 0.0  # the run's start (perf_counter) [s]
+        self._best: Node  # the stance nearest the goal so far (set by run)
         self._count = itertools.count()
 
     def run(self, start: Node) -> tuple[Node, Stats]:
-        """Search from the start stance until the goal, the budget, or an empty open list."""
-        t0 = time.perf_counter()
+        """Search from the start stance until the goal, the budget, or an empty open list:
+        in rounds with one worker, with transitions in flight on the pool with more."""
+        self._t0 = time.perf_counter()
         self.holds[start.place] = 1
-        best = start
+        self._best = start
         self._push_successors(start)
-        while True:
-            self.stats.time_s = time.perf_counter() - t0
-            if self.heur.reached(best.key, best.extra.get("frame")):
-                self.stats.reached, self.stats.stop = True, "goal reached"
-                break
-            stop = self._stop_reason()
-            if stop:
-                self.stats.stop = stop
-                break
-            round_, costs = self._pop_round()
-            for node in self._evaluate(round_, costs):
-                if self.heur.reached(node.key, node.extra.get("frame")) or node.h < best.h:
-                    best = node
-                self._push_successors(node)
-        self.stats.time_s = time.perf_counter() - t0
+        if self.solver.workers > 1:
+            self._in_flight()
+        else:
+            self._in_rounds()
+        self.stats.time_s = time.perf_counter() - self._t0
         self.stats.postures = self.solver.solved
+        best = self._best
         if not self.stats.reached:
             self.stats.best = best.describe()
             self.stats.blocked = self.blocked(best)
         return best, self.stats
+
+    def _in_rounds(self) -> None:
+        """Pop a round (as many transitions as workers), solve it, take its new stances."""
+        while not self._done():
+            round_, costs = self._pop_round()
+            for node in self._evaluate(round_, costs):
+                self._take(node)
+
+    def _in_flight(self) -> None:
+        """Keep one transition in flight per worker: each answer that lands is taken at once
+        (a touch that verified sends its hold), and a free worker takes the focal list's next
+        transition; the transitions still in flight when the goal is reached are abandoned."""
+        flights: dict[Any, _Flight] = {}
+        while True:
+            if self._reached():
+                self.solver.abort()
+                return
+            stop = self._stop_reason()
+            if not stop:
+                self._launch(flights)
+            if not flights:
+                self.stats.stop = stop or self._stop_reason() or "no transition left to try"
+                return
+            for handle, answer in self.solver.wait(list(flights)):
+                self._landed(flights, flights.pop(handle), answer)
+            self.stats.postures = self.solver.solved
+
+    def _launch(self, flights: dict[Any, _Flight]) -> None:
+        """Send focal transitions to distinct new stances until every worker has one."""
+        taken = {f.child for f in flights.values()}
+        while len(flights) < self.solver.workers and self.stats.tried < self.budget.nodes:
+            entry = self._pop_focal(taken)
+            if entry is None:
+                return
+            taken.add(entry.child)
+            self.stats.tried += 1
+            if entry.action.kind == "remove" and self.rules.release == "unload":
+                self.stats.unloads += 1
+            built = self._build(entry.node, entry.action, None)
+            if built is not None:
+                flight = _Flight(entry.node, entry.action, entry.child, entry.cost, built)
+                flights[self.solver.submit(built[1])] = flight
+
+    def _landed(self, flights: dict[Any, _Flight], flight: _Flight, answer: Any) -> None:
+        """A posture of a transition in flight is solved: send the hold of a verified touch,
+        else take the transition's stance (when all verified)."""
+        flight.stages.append((flight.built, answer))
+        node, action = flight.node, flight.action
+        if action.kind == "add" and len(flight.stages) == 1:
+            if isinstance(answer, Result) and answer.success:
+                hold = self._build(node, action, (flight.built[2], answer))
+                if hold is not None:
+                    flight.built = hold
+                    flights[self.solver.submit(hold[1])] = flight
+                    return
+        child = self._child(node, action, flight.stages, flight.cost)
+        if child is not None:
+            self._take(child)
+
+    def _take(self, node: Node) -> None:
+        """A new stance held: the best so far when nearer the goal, its successors pushed."""
+        if self.heur.reached(node.key, node.extra.get("frame")) or node.h < self._best.h:
+            self._best = node
+        self._push_successors(node)
+
+    def _reached(self) -> bool:
+        """The best stance holds the goal (the stats say so)."""
+        self.stats.time_s = time.perf_counter() - self._t0
+        best = self._best
+        if self.heur.reached(best.key, best.extra.get("frame")):
+            self.stats.reached, self.stats.stop = True, "goal reached"
+        return self.stats.reached
+
+    def _done(self) -> bool:
+        """The goal is reached, or a budget spent, or nothing is left to try (said in the
+        stats)."""
+        if self._reached():
+            return True
+        self.stats.stop = self._stop_reason()
+        return bool(self.stats.stop)
 
     def blocked(self, node: Node) -> list[str]:
         """Why the stance does not hold the goal (posturegen.planner.blocked)."""
@@ -350,7 +438,8 @@ class Search:
         key = action.child_key(node.key)
         robot = done[-1].problem.robot
         positions = patch_positions(robot, done[-1].result.q)
-        place = place_of(key, positions)
+        left = action.child_left(node.left, node.positions)
+        place = place_of(key, positions, left)
         if self._closed(place):
             return None
         if action.kind == "add" and _revisits(
@@ -377,6 +466,7 @@ class Search:
             action,
             node.depth + 1,
             {"frame": frame},
+            left,
         )
         self.stats.held += 1
         if self.progress:

@@ -94,11 +94,42 @@ class RoundSolver:
         self.timing.add(out, time.perf_counter() - t0)
         return out
 
-    def _pooled(self, datas: Sequence[dict[str, Any]]) -> list[Result | BatchError]:
+    def submit(self, data: dict[str, Any]) -> Any:
+        """Start solving one problem dict on the pool; its handle for :meth:`wait`."""
+        self.solved += 1
+        return self._open().submit(make_jobs([data]))
+
+    def wait(self, handles: Sequence[Any]) -> list[tuple[Any, Result | BatchError]]:
+        """The problems of ``handles`` that are solved (at least one, blocking until then),
+        each with its answer; the wait counts as the postures' time."""
+        t0 = time.perf_counter()
+        pool = self._open()
+        out: list[tuple[Any, Result | BatchError]] = []
+        for handle, answer in pool.wait(list(handles)):
+            if isinstance(answer, BaseException):
+                why = "the worker process died" if pool.crashed(answer) else str(answer)
+                out.append((handle, BatchError("posture", "error", why)))
+            else:
+                out.append((handle, answer[0].result))
+        pool.recover()
+        self.timing.add([r for _, r in out], time.perf_counter() - t0)
+        return out
+
+    def abort(self) -> None:
+        """Stop the workers now, abandoning the problems in flight."""
+        if isinstance(self._pool, LocalBackend):
+            self._pool.abort()
+            self._pool = None
+        self.close()
+
+    def _open(self) -> LocalBackend | RayBackend:
         if self._pool is None:
             self._pool = open_backend("local", self.workers)
+        return self._pool
+
+    def _pooled(self, datas: Sequence[dict[str, Any]]) -> list[Result | BatchError]:
         answers: dict[int, Result | BatchError] = {}
-        for item in run_jobs(self._pool, make_jobs(datas), size=1):
+        for item in run_jobs(self._open(), make_jobs(datas), size=1):
             answers[item.index] = item.result
         return [answers[i] for i in range(len(datas))]
 
