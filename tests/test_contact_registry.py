@@ -14,19 +14,9 @@ from posturegen.errors import InputError
 from posturegen.io.schema import problem_schema
 from posturegen.terms.contacts import FixedContact, contact_types, register_contact
 from posturegen.verify import verify_posture
+from tests.stances import talos_on_ground
 
-STAND = {
-    "robot": "talos",
-    "surfaces": [{"name": "ground", "position": [0, 0, 0], "rpy": [0, 0, 0],
-                  "vertices": [[-1, -1], [1, -1], [1, 1], [-1, 1]]}],
-    "contacts": [
-        {"robot_patch": "left_sole", "surface": "ground", "type": "fixed",
-         "position": [0.0, 0.1], "yaw": 0.0},
-        {"robot_patch": "right_sole", "surface": "ground", "type": "fixed",
-         "position": [0.0, -0.1], "yaw": 0.0},
-    ],
-    "options": {"initial": "half_sitting"},
-}  # fmt: skip
+STAND = talos_on_ground()
 
 
 def test_the_registry_holds_the_five_types_and_the_schema_follows_it():

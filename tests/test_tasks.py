@@ -29,22 +29,9 @@ from posturegen.terms.tasks import (
     task_types,
 )
 from posturegen.verify import verify_posture
+from tests.stances import talos_on_ground
 
-STAND = {
-    "robot": "talos",
-    "mu": 0.7,
-    "surfaces": [
-        {"name": "ground", "position": [0, 0, 0], "rpy": [0, 0, 0],
-         "vertices": [[-1, -1], [1, -1], [1, 1], [-1, 1]]}
-    ],
-    "contacts": [
-        {"robot_patch": "left_sole", "surface": "ground", "type": "fixed",
-         "position": [0.0, 0.1], "yaw": 0.0},
-        {"robot_patch": "right_sole", "surface": "ground", "type": "fixed",
-         "position": [0.0, -0.1], "yaw": 0.0},
-    ],
-    "options": {"initial": "half_sitting", "self_collision": False},
-}  # fmt: skip
+STAND = talos_on_ground(self_collision=False)
 HAND = "gripper_right_base_link"
 LEFT = "gripper_left_base_link"
 

@@ -12,19 +12,10 @@ import pytest
 from posturegen import problem_from_dict, solve
 from posturegen.errors import InputError
 from posturegen.verify import verify_posture
+from tests.stances import talos_on_ground
 
-STAND = {
-    "robot": "talos",
-    "surfaces": [{"name": "ground", "position": [0, 0, 0], "rpy": [0, 0, 0],
-                  "vertices": [[-1, -1], [1, -1], [1, 1], [-1, 1]]}],
-    "contacts": [
-        {"robot_patch": "left_sole", "surface": "ground", "type": "fixed",
-         "position": [0.0, 0.1], "yaw": 0.0, "unloaded": True},
-        {"robot_patch": "right_sole", "surface": "ground", "type": "fixed",
-         "position": [0.0, -0.1], "yaw": 0.0},
-    ],
-    "options": {"initial": "half_sitting", "self_collision": True},
-}  # fmt: skip
+STAND = talos_on_ground(self_collision=True)
+STAND["contacts"][0]["unloaded"] = True
 
 
 def test_an_unloaded_sole_stays_where_it_is_and_bears_nothing():
