@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pinocchio as pin
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from posturegen.bench.reach import MARGIN, _problem
+from posturegen.collision import stance_hold
 from posturegen.collision.active_set import ActiveSet, placed_pairs
 from posturegen.collision.proxies import proxy_model
 from posturegen.collision.stance_hold import (
@@ -207,3 +210,21 @@ def test_a_stance_whose_fixed_feet_intersect_fails_at_once_saying_so():
     excluded = dataclasses.replace(problem.collision_options, exclude=feet)
     assert placed_blocked(dataclasses.replace(problem, collision_options=excluded)) is None
     assert placed_blocked(_problem(CLIFF, [0.4, -0.3, 0.9], True)) is None
+
+
+def test_the_caps_of_a_patch_placed_elsewhere_on_its_joint_are_its_own():
+    """The caps' cache holds what they are computed from: a sole patch moved 4 cm on its
+    joint, with the same target, gets the caps of its own stance posture, not those of the
+    patch cached before it."""
+    first = _problem(CLIFF, [0.3, -0.3, 0.9], True)
+    pm = proxy_model(first.robot)
+    c0 = first.contacts[0]
+    shift = pin.SE3(np.eye(3), np.array([0.0, 0.04, 0.0]))
+    patch = dataclasses.replace(c0.patch, T_joint_patch=c0.patch.T_joint_patch * shift)
+    c_moved = dataclasses.replace(c0, patch=patch)
+    moved = dataclasses.replace(first, contacts=(c_moved, *first.contacts[1:]))
+    cached_first = stance_caps(first, pm)
+    fixed = [c for c in moved.contacts if c.fixed_in_place]
+    own = stance_hold._caps(moved, pm, fixed, CAP_REACH)
+    assert not np.array_equal(own, cached_first)  # the move matters to the caps
+    np.testing.assert_array_equal(stance_caps(moved, pm), own)

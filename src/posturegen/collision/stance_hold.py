@@ -43,7 +43,8 @@ STANDS = 1e-4  # [m, rad] a stance posture whose patches are farther from their 
 # 6.2 -> 3.4 ms in all (with the thread's scratch data instead of three createData)
 CAP_REACH = 0.1
 
-# per robot model, q_init, fixed targets and reach
+# per robot model, proxy model, q_init, fixed patches (joint, placement on it) and their
+# targets, and reach: all that _caps reads
 _CAPS: BoundedCache[np.ndarray] = BoundedCache("stance caps", 64)
 # per proxy model and chain: the candidate joint pairs on the chain
 _LINKS: BoundedCache[np.ndarray] = BoundedCache("joint pairs on a chain", 16)
@@ -112,8 +113,16 @@ def stance_caps(problem: Any, pm: ProxyModel, reach: float = CAP_REACH) -> np.nd
     ]
     key = (
         Ref(problem.robot.model),
+        Ref(pm),
         np.asarray(problem.q_init, dtype=float).tobytes(),
-        tuple((c.patch.joint_id, c.T_world_target.homogeneous.tobytes()) for c in fixed),
+        tuple(
+            (
+                c.patch.joint_id,
+                c.patch.T_joint_patch.homogeneous.tobytes(),
+                c.T_world_target.homogeneous.tobytes(),
+            )
+            for c in fixed
+        ),
         reach,
     )
     return _CAPS.get_or_make(key, lambda: _caps(problem, pm, fixed, reach))
