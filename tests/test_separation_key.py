@@ -63,3 +63,33 @@ def test_a_cached_separated_start_is_the_one_its_problem_computes():
     after = [start(*pose) for pose in poses]  # each after the ones before it, cached
     for a, b in zip(alone, after, strict=True):
         assert np.array_equal(a, b)
+
+
+def test_a_cached_scan_is_the_one_its_posture_computes():
+    """The active set's scans are cached per posture: the same joints at three base poses,
+    each scan's close pairs and distances, computed after the others filled the cache, are
+    bit for bit those computed with an empty cache (keyed on the joints alone, the first
+    pose's stood for the others, ~1e-15 apart)."""
+    poses = ((0.0, 0.0), (1.3, 0.7), (-2.1, -2.5))
+
+    def close(x: float, yaw: float) -> tuple[np.ndarray, np.ndarray]:
+        program = Program.of(_problem(x, yaw))
+        active = ActiveSet.of(program)
+        q = program.q_init.copy()
+        q[7:] = pin.neutral(program.robot.model)[7:] + 0.3
+        q[7:] = np.clip(q[7:], program.robot.q_lower, program.robot.q_upper)
+        pin.forwardKinematics(active.model, active.data, q)
+        centers = active.pm.centers_world(active.model, active.data)
+        slack = np.full(len(active.pm.joint_pairs), 0.05)
+        found = active._cached_close(q, centers, slack)
+        return np.stack([found.i, found.j]), found.d.copy()
+
+    alone = []
+    for pose in poses:
+        clear_caches()
+        alone.append(close(*pose))
+    clear_caches()
+    after = [close(*pose) for pose in poses]
+    assert len(alone[0][1]) > 0  # pairs were found
+    for (pairs_a, d_a), (pairs_b, d_b) in zip(alone, after, strict=True):
+        assert np.array_equal(pairs_a, pairs_b) and np.array_equal(d_a, d_b)

@@ -228,9 +228,11 @@ class ActiveSet:
 
     def _posture_key(self, q: np.ndarray, slack: np.ndarray) -> tuple[Any, ...]:
         """The key of a scan's result at posture q with ``slack`` (P,) [m] over this set's
-        candidate links (the proxy model held). Self distances do not depend on the base
-        pose, so the key holds q's joints only: stances placed differently share it."""
-        return (Ref(self.pm), q[7:].tobytes(), slack.tobytes(), self.links.tobytes())
+        candidate links (the proxy model held). The key holds all of q: self distances do
+        not depend on the base pose, but the centres they are computed from do, to rounding
+        (keyed on the joints only, a scan cached at one base pose stood for another's, ~1e-15
+        apart: the history dependence that collision.separation's key removed)."""
+        return (Ref(self.pm), q.tobytes(), slack.tobytes(), self.links.tobytes())
 
     def _below(
         self, q: np.ndarray, centers: np.ndarray, slack: np.ndarray, wider: np.ndarray | None
@@ -261,8 +263,8 @@ class ActiveSet:
         return set(_NEAR.get_or_make(self._posture_key(q, slack), make))
 
     def _cached_close(self, q: np.ndarray, centers: np.ndarray, slack: np.ndarray) -> Close:
-        """The candidate self pairs closer than ``slack`` (P,) [m] at q, cached on q's joints
-        and the slack."""
+        """The candidate self pairs closer than ``slack`` (P,) [m] at q, cached on q and the
+        slack."""
         key = self._posture_key(q, slack)
 
         def make() -> Close:
