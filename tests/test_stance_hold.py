@@ -130,8 +130,9 @@ def test_holds_are_the_reference_rule_at_the_reference_stance_and_only_lower_els
 def test_a_stances_first_scan_finds_the_pairs_of_a_scan_with_its_own_holds():
     """The first scan of a solve reads the pairs within the holds without the stance's caps,
     cached per posture, and keeps those within this stance's (lower) holds: the same pairs,
-    and the same closest ones, as a search with its holds; a second stance with other caps
-    at the same joints reads the cache (same pairs as its own search)."""
+    and the same closest ones, as a search with its holds; a second stance with other caps,
+    the same joints and another base pose has its own entries (a posture's key is all of q:
+    the centres differ by rounding), and its closest pairs are its own search's too."""
     from posturegen.collision import active_set
     from posturegen.collision.proxies import closest
 
@@ -159,9 +160,9 @@ def test_a_stances_first_scan_finds_the_pairs_of_a_scan_with_its_own_holds():
         got = active._below(problem.q_init, centres, lower, wider)
         want = active.pm.close_pairs(centres, lower, active.links)
         assert got.tuples() == want.tuples() and len(got.d) == len(want.d) > 0
-        if k == 0:  # computed at this stance's own centres: the closest ones agree exactly
-            assert scan.near_self == closest(near, active_set.SELF_PER_LINK).tuples()
-    assert len(active_set._BELOW) == 2  # one entry per slack (below, near) for both stances
+        # computed at this stance's own centres: the closest ones agree exactly
+        assert scan.near_self == closest(near, active_set.SELF_PER_LINK).tuples()
+    assert len(active_set._BELOW) == 4  # one entry per slack (below, near) per stance
 
 
 def test_the_pair_of_the_two_fixed_feet_leaves_the_program_not_the_mesh_check():
