@@ -35,8 +35,15 @@ FRAMES = ["base_link", "l_foot"]
 
 
 def test_stairs_plan_reaches_the_top_with_every_stage_verified(tmp_path):
-    """Talos, 2 steps, no stage list: both soles end on step 2, every posture re-checked."""
+    """Talos, 2 steps, no stage list: both soles end on step 2, every posture re-checked.
+    The plan learns its own active sets: the process's are as they were after it."""
+    from posturegen.solver import solve as solve_module
+
+    outer = solve_module._LEARNED
+    outer.put(("a problem solved before the plan",), (frozenset(), frozenset(), None))
+    n_outer = len(outer)
     report = plan("stairs", tmp_path, robot="talos", steps=2, budget=Budget(nodes=20))
+    assert solve_module._LEARNED is outer and len(outer) == n_outer
     assert report.success and report.stats.reached
     index = json.loads((tmp_path / "sequence.json").read_text())
     assert index["success"] and len(index["stages"]) >= 5
@@ -446,3 +453,18 @@ def test_a_free_patch_is_part_of_the_place_it_left():
     assert {p for p, _, _ in again} == {"left_sole", "right_sole"}
     assert not any(s.startswith(FREE) for _, s, _ in again)
     assert on.child_left(left, positions) == {}
+
+
+def test_inside_own_learning_solves_start_from_no_learned_active_set():
+    """posturegen.solver.solve.own_learning: an empty set of learned active sets inside, the
+    process's back after, what was learned inside forgotten."""
+    from posturegen.solver import solve as solve_module
+
+    outer = solve_module._LEARNED
+    outer.put(("before",), (frozenset(), frozenset(), None))
+    with solve_module.own_learning():
+        inner = solve_module._LEARNED
+        assert inner is not outer and len(inner) == 0
+        inner.put(("inside",), (frozenset(), frozenset(), None))
+    assert solve_module._LEARNED is outer
+    assert ("before",) in outer and ("inside",) not in outer

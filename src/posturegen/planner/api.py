@@ -17,7 +17,7 @@ from ..errors import InputError
 from ..io.problem_file import problem_from_dict, read_yaml
 from ..model.robot import Robot
 from ..solver.problem import Problem
-from ..solver.solve import Result
+from ..solver.solve import Result, own_learning
 from .goal import Goal, parse_goal
 from .heuristic import Heuristic
 from .layout import goal_spots, regions
@@ -181,7 +181,8 @@ def plan(
     _solver_options(seq, budget)
     data, problem = _start_problem(seq, start_stage)
     the_goal, the_rules = _inputs(seq, scene_name, problem, goal, rules)
-    with RoundSolver(workers) as solver:
+    # the plan learns its own active sets: its outcome is not that of the process's history
+    with own_learning(), RoundSolver(workers) as solver:
         start = _start(seq, data, problem, solver)
         model = problem.robot
         heur = _heuristic(the_goal, the_rules, start, model)

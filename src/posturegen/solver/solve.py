@@ -6,8 +6,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -103,6 +105,23 @@ class Result:
 _LEARNED: BoundedCache[tuple[frozenset[tuple[int, int]], frozenset[tuple[int, int]], Capacity]] = (
     BoundedCache("learned active sets", 64)
 )
+
+
+@contextlib.contextmanager
+def own_learning() -> Iterator[None]:
+    """Inside, solves learn active sets and capacities of their own, from none, as in a new
+    process; the process's are back after. What runs inside is then a function of its inputs,
+    not of what the process solved before (a plan: ATLAS' 2-step stairs was reached in the
+    test suite, after other tests had filled the learned sets, and not from a fresh process)."""
+    global _LEARNED
+    outer = _LEARNED
+    _LEARNED = BoundedCache("learned active sets (own)", 64, register=False)
+    try:
+        yield
+    finally:
+        _LEARNED = outer
+
+
 # Learned pairs start the next problem's active set: up to 160 of them. Up to 1000 (Talos'
 # first active set at half-sitting holds 427 sphere pairs), HRP-2's vertical ladder failed at
 # 'left foot on rung 2' (infeasible): rows learned from the earlier stages and from the
