@@ -194,9 +194,7 @@ class Search:
             if entry is None:
                 return
             taken.add(entry.child)
-            self.stats.tried += 1
-            if entry.action.kind == "remove" and self.rules.release == "unload":
-                self.stats.unloads += 1
+            self._count_tried([entry.action])
             built = self._build(entry.node, entry.action, None)
             if built is not None:
                 flight = _Flight(entry.node, entry.action, entry.child, entry.cost, built)
@@ -207,13 +205,12 @@ class Search:
         else take the transition's stance (when all verified)."""
         flight.stages.append((flight.built, answer))
         node, action = flight.node, flight.action
-        if action.kind == "add" and len(flight.stages) == 1:
-            if isinstance(answer, Result) and answer.success:
-                hold = self._build(node, action, (flight.built[2], answer))
-                if hold is not None:
-                    flight.built = hold
-                    flights[self.solver.submit(hold[1])] = flight
-                    return
+        if len(flight.stages) == 1 and _verified_touch(action, flight.built, answer):
+            hold = self._build(node, action, (flight.built[2], answer))
+            if hold is not None:
+                flight.built = hold
+                flights[self.solver.submit(hold[1])] = flight
+                return
         child = self._child(node, action, flight.stages, flight.cost)
         if child is not None:
             self._take(child)
@@ -381,16 +378,14 @@ class Search:
         (``costs``: each transition's [m])."""
         if not round_:
             return []
-        self.stats.tried += len(round_)
+        self._count_tried([a for _, a in round_])
         first = [self._build(n, a, None) for n, a in round_]
         answers = self._solve(first)
-        if self.rules.release == "unload":
-            self.stats.unloads += sum(a.kind == "remove" for _, a in round_)
         holds: list[tuple[int, tuple[str, dict[str, Any], Any] | None]] = []
         for i, ((node, action), built, answer) in enumerate(
             zip(round_, first, answers, strict=True)
         ):
-            if action.kind == "add" and isinstance(answer, Result) and answer.success and built:
+            if _verified_touch(action, built, answer):
                 holds.append((i, self._build(node, action, (built[2], answer))))
         hold_answers = self._solve([b for _, b in holds])
         hold_of = {i: (b, a) for (i, b), a in zip(holds, hold_answers, strict=True)}
@@ -403,6 +398,12 @@ class Search:
             if child is not None:
                 nodes.append(child)
         return nodes
+
+    def _count_tried(self, actions: list[Action]) -> None:
+        """The transitions tried, and the removals among them unloaded, in the stats."""
+        self.stats.tried += len(actions)
+        if self.rules.release == "unload":
+            self.stats.unloads += sum(a.kind == "remove" for a in actions)
 
     def _build(
         self, node: Node, action: Action, touch: tuple[Any, Result] | None
@@ -508,6 +509,11 @@ class Search:
         )
         if self.progress:
             self.progress(self.stats, None, f"failed {action.label()}: {why}")
+
+
+def _verified_touch(action: Action, built: Any, answer: Any) -> bool:
+    """The first posture of an add (its touch) was built and verified: its hold comes next."""
+    return action.kind == "add" and bool(built) and isinstance(answer, Result) and answer.success
 
 
 def _age(node: Node, patch: str) -> int:

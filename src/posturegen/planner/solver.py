@@ -105,13 +105,16 @@ class RoundSolver:
         t0 = time.perf_counter()
         pool = self._open()
         out: list[tuple[Any, Result | BatchError]] = []
+        lost = False
         for handle, answer in pool.wait(list(handles)):
             if isinstance(answer, BaseException):
+                lost = True
                 why = "the worker process died" if pool.crashed(answer) else str(answer)
                 out.append((handle, BatchError("posture", "error", why)))
             else:
                 out.append((handle, answer[0].result))
-        pool.recover()
+        if lost:  # a new pool for the transitions still to come (as batch.schedule does)
+            pool.recover()
         self.timing.add([r for _, r in out], time.perf_counter() - t0)
         return out
 
