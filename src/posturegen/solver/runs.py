@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from .._cache import BoundedCache, Ref
-from .compile import CACHE_SIZE, CompiledNLP, is_compiled
+from .compile import CACHE_SIZE, CompiledNLP, casadi_column, is_compiled
 from .problem import Program
 from .sqp.core import Bounds, SQPOptions, sqp
 from .sqp.oracle import Oracle
@@ -76,6 +76,7 @@ class Run:
     lam_x: np.ndarray | None = None
     lam_g: np.ndarray | None = None
     method: str = "ipopt"  # the solver that ran: "sqp" or "ipopt"
+    p_casadi: Any = None  # p as the CasADi column IPOPT was given (the re-check reuses it)
 
     @property
     def ok(self) -> bool:
@@ -171,11 +172,12 @@ def _ipopt(start: _Start) -> Run:
     warm: dict[str, Any] = {}
     if start.lam_g is not None and start.lam_x is not None:
         warm = {"lam_x0": start.lam_x, "lam_g0": start.lam_g}
+    p = casadi_column(start.p)
     with compiled.lock:  # a solver's stats() are those of its last call: one thread at a time
         t0 = time.perf_counter()
         sol = compiled.solver(
             x0=start.x,
-            p=start.p,
+            p=p,
             lbx=compiled.lbx,
             ubx=compiled.ubx,
             lbg=start.lbg,
@@ -194,6 +196,7 @@ def _ipopt(start: _Start) -> Run:
         solve_time_s=float(stats.get("t_wall_total", wall)),
         lam_x=np.array(sol["lam_x"]).ravel(),
         lam_g=np.array(sol["lam_g"]).ravel(),
+        p_casadi=p,
     )
 
 

@@ -25,7 +25,7 @@ from ..collision.separation import separated_start
 from ..collision.slots import Capacity
 from ..io.posture_file import add_solve_fields, posture_dict, write_posture
 from ..verify import VerifyReport, verify_posture
-from .compile import initial_guess, layout_of
+from .compile import casadi_column, initial_guess, layout_of
 from .problem import Problem, Program, SolverOptions
 from .runs import (
     _IPOPT_OK,
@@ -236,7 +236,8 @@ def _by_method(runs: list[Run]) -> dict[str, int]:
 
 def _outputs(run: Run) -> dict[str, np.ndarray]:
     """The program's outputs at a run's solution, flattened (column-major)."""
-    out = run.compiled.outputs(x=run.x, p=run.p)
+    p = run.p_casadi if run.p_casadi is not None else casadi_column(run.p)
+    out = run.compiled.outputs(x=run.x, p=p)
     return {k: np.array(v).ravel(order="F") for k, v in out.items()}
 
 
