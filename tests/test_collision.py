@@ -540,6 +540,35 @@ def test_broad_phase_of_the_self_pairs_keeps_every_close_pair(talos):
         assert np.isin(close.link, links).all()
 
 
+@pytest.mark.parametrize("per_link", [1, 16])
+def test_the_closest_pairs_of_each_joint_pair_are_found_without_measuring_all(talos, per_link):
+    """closest_pairs: the per_link closest candidate pairs of each joint pair within its
+    slack, against every pair computed and sorted (random postures, a tight and a wide
+    slack); with joint pairs restricted, none of the others."""
+    pm = proxy_model(talos)
+    i, j, link = _all_pairs(pm)
+    rng = np.random.default_rng(7)
+    for model, data in _random_postures(talos, 4, 11):
+        centers = pm.centers_world(model, data)
+        exact = pm.distances(centers, i, j)
+        for within in (0.01, 0.06, 0.3):
+            slack = np.full(len(pm.joint_pairs), within) + rng.uniform(0, 0.02, len(pm.joint_pairs))
+            got = pm.closest_pairs(centers, slack, per_link)
+            inside = np.flatnonzero(exact < slack[link])
+            order = inside[np.lexsort((exact[inside], link[inside]))]
+            rank = np.arange(len(order)) - np.searchsorted(link[order], link[order])
+            want = order[rank < per_link]
+            assert len(got.d) == len(want)
+            assert got.tuples() == {
+                (min(a, b), max(a, b))
+                for a, b in zip(i[want].tolist(), j[want].tolist(), strict=True)
+            }
+            np.testing.assert_allclose(np.sort(got.d), np.sort(exact[want]), atol=1e-12)
+        links = np.arange(0, len(pm.joint_pairs), 3)
+        got = pm.closest_pairs(centers, np.full(len(pm.joint_pairs), 0.3), per_link, links)
+        assert len(got.d) and np.isin(got.link, links).all()
+
+
 def test_the_separated_start_parts_pressed_pairs_and_keeps_the_supports(talos):
     """Talos' upper arms pressed against its torso (shoulder roll 0.05 rad): the first start
     moves the joints that carry no contact so that the pairs closer than margin + SEPARATION

@@ -183,7 +183,7 @@ class ActiveSet:
         if self.self_pairs:
             held = np.minimum(self.pm.pair_clearance(margin), self.caps)
             ij = np.array(sorted(self.self_pairs), dtype=int)
-            link = np.array([self.pm.link_index(*self.pm.joint_ids[p]) for p in ij], dtype=int)
+            link = self.pm.link_indices(self.pm.joint_ids[ij[:, 0]], self.pm.joint_ids[ij[:, 1]])
             d = self.pm.distances(centers, ij[:, 0], ij[:, 1])
             keep = d < held[link] + self.options.activation
             self.self_pairs = {(int(i), int(j)) for i, j in ij[keep]}
@@ -210,7 +210,7 @@ class ActiveSet:
         centers, _margin = self._last
         if self.self_pairs:
             ij = np.array(sorted(self.self_pairs), dtype=int)
-            link = np.array([self.pm.link_index(*self.pm.joint_ids[p]) for p in ij], dtype=int)
+            link = self.pm.link_indices(self.pm.joint_ids[ij[:, 0]], self.pm.joint_ids[ij[:, 1]])
             d = self.pm.distances(centers, ij[:, 0], ij[:, 1])
             kept = closest(Close(ij[:, 0], ij[:, 1], link, d), SELF_SLOT_BLOCK)
             self.self_pairs = set(kept.tuples())
@@ -255,10 +255,10 @@ class ActiveSet:
 
         def make() -> frozenset[tuple[int, int]]:
             if wider is None:
-                near = self.pm.close_pairs(centers, slack, self.links)
+                near = self.pm.closest_pairs(centers, slack, SELF_PER_LINK, self.links)
             else:
-                near = _within(self._cached_close(q, centers, wider), slack)
-            return frozenset(closest(near, SELF_PER_LINK).tuples())
+                near = closest(_within(self._cached_close(q, centers, wider), slack), SELF_PER_LINK)
+            return frozenset(near.tuples())
 
         return set(_NEAR.get_or_make(self._posture_key(q, slack), make))
 

@@ -159,20 +159,17 @@ class SelfFill:
         swap = a > b  # the sphere on the smaller joint first
         first = np.where(swap, ij[:, 1], ij[:, 0])
         second = np.where(swap, ij[:, 0], ij[:, 1])
-        link = np.array(
-            [pm.link_index(int(x), int(y)) for x, y in zip(a, b, strict=True)], dtype=int
-        )
+        link = pm.link_indices(a, b)  # (k,)
         order = np.lexsort((second, first, link))
+        link, first, second = link[order], first[order].tolist(), second[order].tolist()
+        starts = np.flatnonzero(np.r_[True, link[1:] != link[:-1]]).tolist() + [len(link)]
         pairs: list[int] = []
         members: list[tuple[tuple[int, int], ...]] = []
-        for k in np.unique(link):
-            mine = order[link[order] == k]
-            for s in range(0, len(mine), SELF_SLOT_BLOCK):
-                chunk = mine[s : s + SELF_SLOT_BLOCK]
-                pairs.append(int(k))
-                members.append(
-                    tuple((int(first[c]), int(second[c])) for c in chunk)  # type: ignore[misc]
-                )
+        for lo, hi in zip(starts[:-1], starts[1:], strict=True):  # each joint pair's run
+            for s in range(lo, hi, SELF_SLOT_BLOCK):
+                e = min(s + SELF_SLOT_BLOCK, hi)
+                pairs.append(int(link[lo]))
+                members.append(tuple(zip(first[s:e], second[s:e], strict=True)))
         return cls(tuple(pairs), tuple(members))
 
     @property
