@@ -1,7 +1,8 @@
-"""A cached separated start is the one its problem computes. Keyed on q's joints alone (the
-base pose moves no self distance), the start cached by one problem differed by ~1e-15 from
-the one a later problem with the same joints computed at its own base pose (rounding moved a
-borderline pair); a stage of HRP-2's vertical ladder failed after plans had filled the cache."""
+"""A cached separated start is the one its problem computes. Computed at the world pose, the
+start cached by one problem differed by ~1e-15 from the one a later problem with the same
+joints computed at its own base pose (rounding moved a borderline pair), and a stage of HRP-2's
+vertical ladder failed after plans had filled the cache; it is now computed with the base at
+the origin (a function of the joints alone) and keyed on the joints."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from posturegen import clear_caches
 from posturegen.collision.active_set import ActiveSet
 from posturegen.collision.separation import separated_start
 from posturegen.io.problem_file import problem_from_dict
+from posturegen.model.kinematics import at_origin
 from posturegen.solver.problem import Program
 
 
@@ -66,23 +68,25 @@ def test_a_cached_separated_start_is_the_one_its_problem_computes():
 
 
 def test_a_cached_scan_is_the_one_its_posture_computes():
-    """The active set's scans are cached per posture: the same joints at three base poses,
-    each scan's close pairs and distances, computed after the others filled the cache, are
-    bit for bit those computed with an empty cache (keyed on the joints alone, the first
-    pose's stood for the others, ~1e-15 apart)."""
+    """The active set's scans are cached per joints: the same joints at three base poses,
+    each scan's close pairs and distances, searched in the base's frame, are bit for bit the
+    same whether computed with an empty cache or after the others filled it, and the same at
+    every base pose (what makes the joints a key; from world centres they were ~1e-15
+    apart); the scans' near and violated pairs too."""
     poses = ((0.0, 0.0), (1.3, 0.7), (-2.1, -2.5))
 
-    def close(x: float, yaw: float) -> tuple[np.ndarray, np.ndarray]:
+    def close(x: float, yaw: float) -> tuple[np.ndarray, np.ndarray, tuple[set, set]]:
         program = Program.of(_problem(x, yaw))
         active = ActiveSet.of(program)
         q = program.q_init.copy()
         q[7:] = pin.neutral(program.robot.model)[7:] + 0.3
         q[7:] = np.clip(q[7:], program.robot.q_lower, program.robot.q_upper)
-        pin.forwardKinematics(active.model, active.data, q)
+        pin.forwardKinematics(active.model, active.data, at_origin(q))
         centers = active.pm.centers_world(active.model, active.data)
         slack = np.full(len(active.pm.joint_pairs), 0.05)
         found = active._cached_close(q, centers, slack)
-        return np.stack([found.i, found.j]), found.d.copy()
+        scan = active.scan(q, 0.005)
+        return np.stack([found.i, found.j]), found.d.copy(), (scan.near_self, scan.violated_self)
 
     alone = []
     for pose in poses:
@@ -90,6 +94,8 @@ def test_a_cached_scan_is_the_one_its_posture_computes():
         alone.append(close(*pose))
     clear_caches()
     after = [close(*pose) for pose in poses]
-    assert len(alone[0][1]) > 0  # pairs were found
-    for (pairs_a, d_a), (pairs_b, d_b) in zip(alone, after, strict=True):
+    assert len(alone[0][1]) > 0 and alone[0][2][0]  # pairs were found
+    for (pairs_a, d_a, scan_a), (pairs_b, d_b, scan_b) in zip(alone, after, strict=True):
         assert np.array_equal(pairs_a, pairs_b) and np.array_equal(d_a, d_b)
+        assert scan_a == scan_b
+        assert np.array_equal(pairs_a, alone[0][0]) and np.array_equal(d_a, alone[0][1])

@@ -18,7 +18,7 @@ import numpy as np
 import pinocchio as pin
 
 from .._cache import BoundedCache, Ref
-from ..model.kinematics import scratch_data
+from ..model.kinematics import at_origin, base_to_world, scratch_data
 from .boxes import CollisionOptions, EnvBox, env_boxes, excluded_joint_ids, row_box_distances
 from .mesh_check import placed_intersections
 from .proxies import Close, ProxyModel, closest, proxy_model
@@ -122,15 +122,16 @@ class ActiveSet:
         and the near pairs (the closest of each pair of links): always with ``near``, else
         only when a pair is violated (the loop ends at a posture without one; the near self
         pairs within 5 cm are thousands, their search was 3/4 of a scan)."""
-        pin.forwardKinematics(self.model, self.data, q)
-        centers = self.pm.centers_world(self.model, self.data)
+        pin.forwardKinematics(self.model, self.data, at_origin(q))
+        body = self.pm.centers_world(self.model, self.data)  # (S, 3) in the base's frame
+        centers = base_to_world(q, body)  # (S, 3) world
         self._last = (centers, margin)  # where term() may let go of far pairs
         out = Scan()
         reference = self.pm.pair_clearance(margin)  # (P,) [m] the holds without the caps
         clearance = np.minimum(reference, self.caps)
         if len(self.links):
             slack = violation_threshold(clearance)
-            bad = self._below(q, centers, slack, violation_threshold(reference) if near else None)
+            bad = self._below(q, body, slack, violation_threshold(reference) if near else None)
             held = np.array(
                 [
                     (min(a, b), max(a, b)) in self.self_pairs
@@ -147,7 +148,7 @@ class ActiveSet:
         if len(self.links) and (near or out.violated_self or out.violated_env):
             slack = clearance + self.options.activation
             wider = reference + self.options.activation if near else None
-            out.near_self = self._near_self(q, centers, slack, wider)
+            out.near_self = self._near_self(q, body, slack, wider)
         return out
 
     def term(self, margin: float) -> CollisionTerm:
@@ -228,19 +229,20 @@ class ActiveSet:
 
     def _posture_key(self, q: np.ndarray, slack: np.ndarray) -> tuple[Any, ...]:
         """The key of a scan's result at posture q with ``slack`` (P,) [m] over this set's
-        candidate links (the proxy model held). The key holds all of q: self distances do
-        not depend on the base pose, but the centres they are computed from do, to rounding
-        (keyed on the joints only, a scan cached at one base pose stood for another's, ~1e-15
-        apart: the history dependence that collision.separation's key removed)."""
-        return (Ref(self.pm), q.tobytes(), slack.tobytes(), self.links.tobytes())
+        candidate links (the proxy model held): q's joints. The self pairs are searched
+        among centres in the base's frame (model.kinematics.at_origin), a function of the
+        joints alone bit for bit, so that a scan cached at one base pose is the one another
+        computes (from world centres they differed by ~1e-15; keyed on all of q instead,
+        each stance of talos-stances-collision searched its own, 8 ms a call)."""
+        return (Ref(self.pm), q[7:].tobytes(), slack.tobytes(), self.links.tobytes())
 
     def _below(
         self, q: np.ndarray, centers: np.ndarray, slack: np.ndarray, wider: np.ndarray | None
     ) -> Close:
-        """The candidate self pairs closer than ``slack`` (P,) [m] at q (centres (S, 3)).
-        With ``wider`` (P,) >= slack (a solve's first posture): those closer than ``wider``
-        are cached per posture (the holds of its stance aside: the caps only lower them), and
-        this stance's are among them."""
+        """The candidate self pairs closer than ``slack`` (P,) [m] at q (centres (S, 3) in the
+        base's frame). With ``wider`` (P,) >= slack (a solve's first posture): those closer
+        than ``wider`` are cached per posture (the holds of its stance aside: the caps only
+        lower them), and this stance's are among them."""
         if wider is None:
             return self.pm.close_pairs(centers, slack, self.links)
         return _within(self._cached_close(q, centers, wider), slack)
@@ -249,9 +251,9 @@ class ActiveSet:
         self, q: np.ndarray, centers: np.ndarray, slack: np.ndarray, wider: np.ndarray | None
     ) -> set:
         """The SELF_PER_LINK closest sphere pairs of each candidate pair of links closer than
-        ``slack`` (P,) [m] at q (centres (S, 3)), cached per posture. With ``wider`` (P,) >=
-        slack (a solve's first posture, shared by every stance), from the cached pairs closer
-        than it; else searched with ``slack`` (a run's solution: a posture of its own)."""
+        ``slack`` (P,) [m] at q (centres (S, 3) in the base's frame), cached per posture.
+        With ``wider`` (P,) >= slack (a solve's first posture, shared by every stance), from
+        the cached pairs closer than it; else searched with ``slack`` (a run's solution)."""
 
         def make() -> frozenset[tuple[int, int]]:
             if wider is None:

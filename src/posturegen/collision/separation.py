@@ -10,6 +10,7 @@ import numpy as np
 import pinocchio as pin
 
 from .._cache import BoundedCache, Ref
+from ..model.kinematics import at_origin
 from ..model.robot import Robot
 from .proxies import ProxyModel, closest
 
@@ -54,9 +55,9 @@ def separated_start(
     half-sitting Talos' forearms are 4 mm above the 1 cm margin from its thighs:
     talos-near-body-collision took 26.5 and 24.5 median iterations (two seeds), 25.0 and 23.5
     from the separated start, 22.5 and 21.0 with it and COLLISION_MU_INIT = 1e-3."""
-    key = (  # all of q: see _SEPARATED
+    key = (  # the joints: the start is computed in the base's frame (see _SEPARATED)
         Ref(robot.model),
-        np.asarray(q, dtype=float).tobytes(),
+        np.asarray(q[7:], dtype=float).tobytes(),
         margin,
         tuple(contact_joints),
         hashlib.sha1(np.asarray(links).tobytes()).digest(),
@@ -67,7 +68,7 @@ def separated_start(
     model = robot.model
     data = model.createData()
     movable, movable_q = _free_joints(model, contact_joints)
-    q = np.array(q, dtype=float)
+    q = at_origin(q)  # self distances and their gradients do not depend on the base pose
     if movable.size == 0 or len(links) == 0:
         return q[7:]  # nothing to part: not worth a cache entry
     held = pm.pair_clearance(margin)  # (P,) pairs tighter at the reference are left there
@@ -116,9 +117,11 @@ def _pair_gradient(
     return grad
 
 
-# separated starts per (model, q, margin, contacts, links). The base pose moves no self
-# distance, but keyed on q's joints alone a start cached by one problem differed by ~1e-15
-# (rounding moved a borderline pair) from what the next problem with the same joints computed,
-# and a stage of HRP-2's vertical ladder failed after plans had filled the cache: keyed on all
-# of q, a start is what its problem computes (tests/test_separation_key.py)
+# separated starts per (model, joints, margin, contacts, links). A start is computed with the
+# base at the origin, a function of the joints alone bit for bit, so that a start cached by
+# one problem is the one the next problem with the same joints computes at its own base pose
+# (computed at the world pose, it differed by ~1e-15 from one base pose to the next, rounding
+# moved a borderline pair, and a stage of HRP-2's vertical ladder failed after plans had
+# filled the cache; keyed on all of q instead, each of the 50 stances of
+# talos-stances-collision computed its own, 26 ms a call: tests/test_separation_key.py)
 _SEPARATED: BoundedCache[np.ndarray] = BoundedCache("separated starts", 64)

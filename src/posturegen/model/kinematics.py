@@ -42,6 +42,27 @@ def scratch_data(model: pin.Model) -> pin.Data:
     return cache.get_or_make(Ref(model), model.createData)
 
 
+# a free-flyer's coordinates at the world origin: (x, y, z, qx, qy, qz, qw)
+ORIGIN_XYZQUAT = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+
+
+def at_origin(q: np.ndarray) -> np.ndarray:
+    """q (nq,) with the free-flyer at the world origin: the placements it gives are in the
+    base's frame and depend on the joints q[7:] alone, bit for bit (a self distance computed
+    there is the same number wherever the robot stands; from world placements it differs by
+    rounding from one base pose to another)."""
+    out = np.array(q, dtype=float)
+    out[:7] = ORIGIN_XYZQUAT
+    return out
+
+
+def base_to_world(q: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Points (n, 3) [m] in the base's frame to world at q's base pose: R_world_base·p +
+    p_world_base."""
+    T = pin.XYZQUATToSE3(np.asarray(q[:7], dtype=float))
+    return points @ T.rotation.T + T.translation
+
+
 def skew(v: Expr) -> Expr:
     """[v]× such that skew(v) @ w = v × w."""
     return ca.vertcat(
