@@ -10,6 +10,7 @@ import multiprocessing
 from pathlib import Path
 
 import pytest
+import yaml
 
 from posturegen import plan
 from posturegen.io.problem_file import read_yaml
@@ -60,11 +61,19 @@ def test_a_scene_of_our_own_is_planned_and_every_posture_verified(name, tmp_path
 
 
 def test_a_step_too_high_for_the_legs_alone_ends_with_what_blocked_it(tmp_path):
-    """rail_step without its rules (no hands): the lower sole's unload is never found, and
-    the plan ends unreached, naming the best stance and the unload that kept the goal."""
+    """rail_step's step raised to 65 cm, without its rules (no hands): with one sole up there
+    and the other on the ground no posture puts the weight on the upper one, and the plan ends
+    unreached, naming the best stance and the unload that kept the goal. (At the scene's
+    50 cm the legs alone climb it in a deep squat: found since the separated start is
+    computed in the base's frame; before, the same unload was not found.)"""
+    scene = read_yaml(PLANS / "rail_step.yaml")
+    step = next(s for s in scene["surfaces"] if s["name"] == "step")
+    step["position"][2] = 0.65
+    start = tmp_path / "high.yaml"
+    start.write_text(yaml.safe_dump(scene))
     report = plan(
-        str(PLANS / "rail_step.yaml"),
-        tmp_path,
+        str(start),
+        tmp_path / "out",
         goal=str(PLANS / "rail_step.goal.yaml"),
         budget=Budget(nodes=30),
     )
