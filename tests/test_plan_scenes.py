@@ -64,8 +64,8 @@ def test_a_step_too_high_for_the_legs_alone_ends_with_what_blocked_it(tmp_path):
     """rail_step's step raised to 65 cm, without its rules (no hands): with one sole up there
     and the other on the ground no posture puts the weight on the upper one, and the plan ends
     unreached, naming the best stance and the unload that kept the goal. (At the scene's
-    50 cm the legs alone climb it in a deep squat: found since the separated start is
-    computed in the base's frame; before, the same unload was not found.)"""
+    50 cm the same plan ends unreached too, but a first start moved by ~1e-16 reached it in a
+    deep squat: what blocks there is the solver's path, not the body.)"""
     scene = read_yaml(PLANS / "rail_step.yaml")
     step = next(s for s in scene["surfaces"] if s["name"] == "step")
     step["position"][2] = 0.65

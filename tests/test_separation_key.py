@@ -1,8 +1,9 @@
-"""A cached separated start is the one its problem computes. Computed at the world pose, the
-start cached by one problem differed by ~1e-15 from the one a later problem with the same
-joints computed at its own base pose (rounding moved a borderline pair), and a stage of HRP-2's
-vertical ladder failed after plans had filled the cache; it is now computed with the base at
-the origin (a function of the joints alone) and keyed on the joints."""
+"""A cached separated start, and a cached scan, are the ones their problem computes. Keyed on
+q's joints alone (the base pose moves no self distance), the start cached by one problem
+differed by ~1e-15 from the one a later problem with the same joints computed at its own base
+pose (rounding moved a borderline pair); a stage of HRP-2's vertical ladder failed after plans
+had filled the cache. The start is keyed on all of q; the scans search in the base's frame,
+a function of the joints alone, and are keyed on the joints."""
 
 from __future__ import annotations
 

@@ -10,9 +10,8 @@ import numpy as np
 import pinocchio as pin
 
 from .._cache import BoundedCache, Ref
-from ..model.kinematics import at_origin
 from ..model.robot import Robot
-from .proxies import ProxyModel, closest
+from .proxies import ProxyModel
 
 SEPARATION = 0.03  # [m] how far above its clearance the first start puts each close pair
 SEPARATED_PER_LINK = 2  # the closest sphere pairs of each joint pair that the start parts
@@ -55,9 +54,9 @@ def separated_start(
     half-sitting Talos' forearms are 4 mm above the 1 cm margin from its thighs:
     talos-near-body-collision took 26.5 and 24.5 median iterations (two seeds), 25.0 and 23.5
     from the separated start, 22.5 and 21.0 with it and COLLISION_MU_INIT = 1e-3."""
-    key = (  # the joints: the start is computed in the base's frame (see _SEPARATED)
+    key = (  # all of q: see _SEPARATED
         Ref(robot.model),
-        np.asarray(q[7:], dtype=float).tobytes(),
+        np.asarray(q, dtype=float).tobytes(),
         margin,
         tuple(contact_joints),
         hashlib.sha1(np.asarray(links).tobytes()).digest(),
@@ -68,7 +67,7 @@ def separated_start(
     model = robot.model
     data = model.createData()
     movable, movable_q = _free_joints(model, contact_joints)
-    q = at_origin(q)  # self distances and their gradients do not depend on the base pose
+    q = np.array(q, dtype=float)
     if movable.size == 0 or len(links) == 0:
         return q[7:]  # nothing to part: not worth a cache entry
     held = pm.pair_clearance(margin)  # (P,) pairs tighter at the reference are left there
@@ -76,7 +75,7 @@ def separated_start(
     for _ in range(SEPARATION_STEPS):
         pin.forwardKinematics(model, data, q)
         centers = pm.centers_world(model, data)
-        near = closest(pm.close_pairs(centers, target, links), SEPARATED_PER_LINK)
+        near = pm.closest_pairs(centers, target, SEPARATED_PER_LINK, links)
         if len(near.d) == 0:
             break
         pin.computeJointJacobians(model, data, q)
@@ -117,11 +116,12 @@ def _pair_gradient(
     return grad
 
 
-# separated starts per (model, joints, margin, contacts, links). A start is computed with the
-# base at the origin, a function of the joints alone bit for bit, so that a start cached by
-# one problem is the one the next problem with the same joints computes at its own base pose
-# (computed at the world pose, it differed by ~1e-15 from one base pose to the next, rounding
-# moved a borderline pair, and a stage of HRP-2's vertical ladder failed after plans had
-# filled the cache; keyed on all of q instead, each of the 50 stances of
-# talos-stances-collision computed its own, 26 ms a call: tests/test_separation_key.py)
+# separated starts per (model, q, margin, contacts, links). The base pose moves no self
+# distance, but keyed on q's joints alone a start cached by one problem differed by ~1e-15
+# (rounding moved a borderline pair) from what the next problem with the same joints computed,
+# and a stage of HRP-2's vertical ladder failed after plans had filled the cache: keyed on all
+# of q, a start is what its problem computes (tests/test_separation_key.py). Computed with the
+# base at the origin instead (a function of the joints, cacheable across the stances of
+# talos-stances-collision: 26 ms a call), the start moved by ~1e-16, and ATLAS' 4-step stairs
+# plan, reached from the world-frame start, was not (the solver's path flipped): kept here
 _SEPARATED: BoundedCache[np.ndarray] = BoundedCache("separated starts", 64)
