@@ -10,6 +10,7 @@ import numpy as np
 import pinocchio as pin
 
 from .._cache import BoundedCache, Ref
+from ..model.kinematics import scratch_data
 from ..model.robot import Robot
 from .proxies import ProxyModel
 
@@ -21,14 +22,20 @@ SEPARATION_STEPS = 6
 SEPARATION_STEP = 0.1
 
 
-def _free_joints(model: pin.Model, contact_joints: list[int]) -> tuple[np.ndarray, np.ndarray]:
-    """Velocity and configuration indices of the one-coordinate joints that are not on a
-    chain from the base to a contact joint."""
+def _support(model: pin.Model, contact_joints: list[int]) -> set[int]:
+    """The joints on a chain from the base to a contact joint (the base's included)."""
     support: set[int] = set()
     for j in contact_joints:
         while j > 0:
             support.add(j)
             j = int(model.parents[j])
+    return support
+
+
+def _free_joints(model: pin.Model, contact_joints: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """Velocity and configuration indices of the one-coordinate joints that are not on a
+    chain from the base to a contact joint."""
+    support = _support(model, contact_joints)
     free = [j for j in range(2, model.njoints) if j not in support and model.joints[j].nq == 1]
     movable = np.array([model.joints[j].idx_v for j in free], dtype=int)
     return movable, np.array([model.joints[j].idx_q for j in free], dtype=int)
@@ -65,13 +72,18 @@ def separated_start(
     if hit is not None:
         return hit.copy()
     model = robot.model
-    data = model.createData()
+    data = scratch_data(model)
     movable, movable_q = _free_joints(model, contact_joints)
     q = np.array(q, dtype=float)
     if movable.size == 0 or len(links) == 0:
         return q[7:]  # nothing to part: not worth a cache entry
     held = pm.pair_clearance(margin)  # (P,) pairs tighter at the reference are left there
     target = np.where(pm.clearance < margin, held, held + SEPARATION)
+    # the joint pairs a free joint moves: a pair of links both on the contacts' chains has a
+    # zero gradient on the free joints (it never made a row), so it is not searched
+    fixed = sorted(_support(model, contact_joints))
+    ends = np.isin(pm.joint_pairs[links], fixed)  # (k, 2)
+    links = np.asarray(links)[~(ends[:, 0] & ends[:, 1])]
     for _ in range(SEPARATION_STEPS):
         pin.forwardKinematics(model, data, q)
         centers = pm.centers_world(model, data)
