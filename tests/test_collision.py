@@ -518,26 +518,35 @@ def _all_pairs(pm):
     return np.concatenate(i), np.concatenate(j), np.concatenate(link)
 
 
-def test_broad_phase_of_the_self_pairs_keeps_every_close_pair(talos):
-    """close_pairs: exact distances, and exactly the candidate pairs closer than their joint
-    pair's slack (random postures, several slacks), against every pair computed."""
-    pm = proxy_model(talos)
-    i, j, link = _all_pairs(pm)
-    rng = np.random.default_rng(1)
-    for model, data in _random_postures(talos, 4, 3):
+def _drawn_slacks(robot, pm, seed: int, withins: tuple[float, ...]):
+    """(centres (S, 3), every candidate pair's distance, a slack (P,) [m]) at 11 random
+    postures, for each base slack in ``withins`` plus up to 2 cm drawn per joint pair."""
+    i, j, _ = _all_pairs(pm)
+    rng = np.random.default_rng(seed)
+    for model, data in _random_postures(robot, seed, 11):
         centers = pm.centers_world(model, data)
         exact = pm.distances(centers, i, j)
-        for within in (0.0, 0.06, 0.3):
+        for within in withins:
             slack = np.full(len(pm.joint_pairs), within) + rng.uniform(0, 0.02, len(pm.joint_pairs))
-            close = pm.close_pairs(centers, slack)
-            expected = np.flatnonzero(exact < slack[link])
-            assert len(close.d) == len(expected)
-            got = set(zip(close.i.tolist(), close.j.tolist(), strict=True))
-            assert got == set(zip(i[expected].tolist(), j[expected].tolist(), strict=True))
-            np.testing.assert_allclose(np.sort(close.d), np.sort(exact[expected]), atol=1e-12)
-        links = np.arange(0, len(pm.joint_pairs), 3)
-        close = pm.close_pairs(centers, np.full(len(pm.joint_pairs), 0.3), links)
-        assert np.isin(close.link, links).all()
+            yield centers, exact, slack
+
+
+def test_broad_phase_of_the_self_pairs_keeps_every_close_pair(talos):
+    """close_pairs: exact distances, and exactly the candidate pairs closer than their joint
+    pair's slack (random postures, several slacks), against every pair computed; with joint
+    pairs restricted, none of the others."""
+    pm = proxy_model(talos)
+    i, j, link = _all_pairs(pm)
+    for centers, exact, slack in _drawn_slacks(talos, pm, 1, (0.0, 0.06, 0.3)):
+        close = pm.close_pairs(centers, slack)
+        expected = np.flatnonzero(exact < slack[link])
+        assert len(close.d) == len(expected)
+        got = set(zip(close.i.tolist(), close.j.tolist(), strict=True))
+        assert got == set(zip(i[expected].tolist(), j[expected].tolist(), strict=True))
+        np.testing.assert_allclose(np.sort(close.d), np.sort(exact[expected]), atol=1e-12)
+    links = np.arange(0, len(pm.joint_pairs), 3)
+    close = pm.close_pairs(centers, np.full(len(pm.joint_pairs), 0.3), links)
+    assert len(close.d) and np.isin(close.link, links).all()
 
 
 @pytest.mark.parametrize("per_link", [1, 16])
@@ -547,26 +556,19 @@ def test_the_closest_pairs_of_each_joint_pair_are_found_without_measuring_all(ta
     slack); with joint pairs restricted, none of the others."""
     pm = proxy_model(talos)
     i, j, link = _all_pairs(pm)
-    rng = np.random.default_rng(7)
-    for model, data in _random_postures(talos, 4, 11):
-        centers = pm.centers_world(model, data)
-        exact = pm.distances(centers, i, j)
-        for within in (0.01, 0.06, 0.3):
-            slack = np.full(len(pm.joint_pairs), within) + rng.uniform(0, 0.02, len(pm.joint_pairs))
-            got = pm.closest_pairs(centers, slack, per_link)
-            inside = np.flatnonzero(exact < slack[link])
-            order = inside[np.lexsort((exact[inside], link[inside]))]
-            rank = np.arange(len(order)) - np.searchsorted(link[order], link[order])
-            want = order[rank < per_link]
-            assert len(got.d) == len(want)
-            assert got.tuples() == {
-                (min(a, b), max(a, b))
-                for a, b in zip(i[want].tolist(), j[want].tolist(), strict=True)
-            }
-            np.testing.assert_allclose(np.sort(got.d), np.sort(exact[want]), atol=1e-12)
-        links = np.arange(0, len(pm.joint_pairs), 3)
-        got = pm.closest_pairs(centers, np.full(len(pm.joint_pairs), 0.3), per_link, links)
-        assert len(got.d) and np.isin(got.link, links).all()
+    for centers, exact, slack in _drawn_slacks(talos, pm, 7, (0.01, 0.06, 0.3)):
+        got = pm.closest_pairs(centers, slack, per_link)
+        inside = np.flatnonzero(exact < slack[link])
+        order = inside[np.lexsort((exact[inside], link[inside]))]
+        rank = np.arange(len(order)) - np.searchsorted(link[order], link[order])
+        want = order[rank < per_link]
+        assert len(got.d) == len(want)
+        pairs = zip(i[want].tolist(), j[want].tolist(), strict=True)
+        assert got.tuples() == {(min(a, b), max(a, b)) for a, b in pairs}
+        np.testing.assert_allclose(np.sort(got.d), np.sort(exact[want]), atol=1e-12)
+    links = np.arange(0, len(pm.joint_pairs), 3)
+    got = pm.closest_pairs(centers, np.full(len(pm.joint_pairs), 0.3), per_link, links)
+    assert len(got.d) and np.isin(got.link, links).all()
 
 
 def test_the_separated_start_parts_pressed_pairs_and_keeps_the_supports(talos):

@@ -41,6 +41,16 @@ def _free_joints(model: pin.Model, contact_joints: list[int]) -> tuple[np.ndarra
     return movable, np.array([model.joints[j].idx_q for j in free], dtype=int)
 
 
+def _moved_links(
+    model: pin.Model, pm: ProxyModel, links: np.ndarray, contact_joints: list[int]
+) -> np.ndarray:
+    """The joint pairs of ``links`` that a free joint moves: a pair of links both on the
+    contacts' chains has a zero gradient on the free joints (it never made a row)."""
+    fixed = sorted(_support(model, contact_joints))
+    ends = np.isin(pm.joint_pairs[links], fixed)  # (k, 2)
+    return np.asarray(links)[~(ends[:, 0] & ends[:, 1])]
+
+
 def separated_start(
     robot: Robot,
     pm: ProxyModel,
@@ -79,11 +89,7 @@ def separated_start(
         return q[7:]  # nothing to part: not worth a cache entry
     held = pm.pair_clearance(margin)  # (P,) pairs tighter at the reference are left there
     target = np.where(pm.clearance < margin, held, held + SEPARATION)
-    # the joint pairs a free joint moves: a pair of links both on the contacts' chains has a
-    # zero gradient on the free joints (it never made a row), so it is not searched
-    fixed = sorted(_support(model, contact_joints))
-    ends = np.isin(pm.joint_pairs[links], fixed)  # (k, 2)
-    links = np.asarray(links)[~(ends[:, 0] & ends[:, 1])]
+    links = _moved_links(model, pm, links, contact_joints)
     for _ in range(SEPARATION_STEPS):
         pin.forwardKinematics(model, data, q)
         centers = pm.centers_world(model, data)
