@@ -109,13 +109,15 @@ def test_a_bad_codegen_variable_is_a_one_line_error(monkeypatch, tmp_path, capsy
 
 @needs_cc
 def test_auto_compiles_before_the_first_solve_and_matches_the_virtual_machine(cache):
-    """Mode auto: a structure's first solve waits for its library and runs it; the same
-    iterates as the virtual machine."""
+    """Mode auto: a structure's first solve waits for its library and runs it, the re-check's
+    outputs too (not the virtual machine's expressions); the same iterates as the virtual
+    machine."""
     reference = solve(_problem("off"))
     builds = len(codegen.BUILDS)
     first = _problem("auto")
     r1 = solve(first)
     assert first.compile().library and len(codegen.BUILDS) == builds + 1
+    assert first.compile().outputs.class_name() == "External"
     assert not codegen.BUILDS[-1].background
     r2 = solve(_problem("auto"))
     assert len(codegen.BUILDS) == builds + 1  # built once
