@@ -265,8 +265,8 @@ class ActiveSet:
         return set(_NEAR.get_or_make(self._posture_key(q, slack), make))
 
     def _cached_close(self, q: np.ndarray, centers: np.ndarray, slack: np.ndarray) -> Close:
-        """The candidate self pairs closer than ``slack`` (P,) [m] at q, cached on q and the
-        slack."""
+        """The candidate self pairs closer than ``slack`` (P,) [m] at q (centres in the base's
+        frame), cached on q's joints and the slack."""
         key = self._posture_key(q, slack)
 
         def make() -> Close:

@@ -24,7 +24,7 @@ import pinocchio as pin
 
 from ..model.robot import Robot
 from . import pairs, proxy_fit, surface
-from .pairs import PairRule, joint_pair, pair_rule
+from .pairs import PairRule, pair_rule
 from .proxy_fit import PROXY_VERSION, Sphere, fit_robot
 
 
@@ -136,7 +136,6 @@ class ProxyModel:
         self._gb = np.concatenate(gb) if gb else np.zeros(0, dtype=int)
         self._gp_link = np.concatenate(link) if link else np.zeros(0, dtype=int)
         self._gp_start = np.searchsorted(self._gp_link, np.arange(len(self.joint_pairs) + 1))
-        self._index = {(int(a), int(b)): k for k, (a, b) in enumerate(self.joint_pairs)}
         top = int(self.joint_pairs.max(initial=self._joint.max(initial=0))) + 1
         self._pair_table = np.full((top, top), -1, dtype=int)  # (lo, hi) -> joint pair index
         if len(self.joint_pairs):
@@ -157,7 +156,7 @@ class ProxyModel:
 
     def link_index(self, a: int, b: int) -> int:
         """The index of joint pair (a, b) (either order) in ``joint_pairs``."""
-        return self._index[joint_pair(a, b)]
+        return int(self.link_indices(np.array([a]), np.array([b]))[0])
 
     def link_indices(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """(k,) the indices of joint pairs (a, b) (each (k,), either order) in
@@ -203,16 +202,13 @@ class ProxyModel:
         spheres leave below T are measured."""
         groups = self._group_pairs(centers, slack, links)
         order = np.lexsort((groups.gap, groups.link))
-        rank = np.arange(len(order)) - np.searchsorted(groups.link[order], groups.link[order])
         first = np.zeros(len(order), dtype=bool)
-        first[order[rank < FIRST_GROUPS]] = True
+        first[order[_rank_in_runs(groups.link[order]) < FIRST_GROUPS]] = True
         found = self._sphere_pairs(centers, groups.take(first), slack[groups.link[first]])
         bound = np.array(slack, dtype=float)  # (P,) [m] T of each joint pair
-        near = closest(found, per_link)
-        order = np.lexsort((near.d, near.link))
-        link, d = near.link[order], near.d[order]
-        kth = np.arange(len(link)) - np.searchsorted(link, link) == per_link - 1
-        bound[link[kth]] = np.minimum(bound[link[kth]], d[kth])
+        near = closest(found, per_link)  # sorted by joint pair, then distance
+        kth = _rank_in_runs(near.link) == per_link - 1
+        bound[near.link[kth]] = np.minimum(bound[near.link[kth]], near.d[kth])
         rest = groups.take(~first & (groups.gap <= bound[groups.link]))
         more = self._sphere_pairs(centers, rest, bound[rest.link])
         pairs = zip(found.fields(), more.fields(), strict=True)
@@ -296,11 +292,15 @@ class ProxyModel:
 
 
 def closest(close: Close, per_link: int) -> Close:
-    """The ``per_link`` closest pairs of each joint pair among ``close``."""
+    """The ``per_link`` closest pairs of each joint pair among ``close``, sorted by joint
+    pair, then distance."""
     order = np.lexsort((close.d, close.link))
-    link = close.link[order]
-    first = np.searchsorted(link, link)  # where each one's joint pair starts
-    return close.take(order[np.arange(len(link)) - first < per_link])
+    return close.take(order[_rank_in_runs(close.link[order]) < per_link])
+
+
+def _rank_in_runs(keys: np.ndarray) -> np.ndarray:
+    """(n,) each entry's position in its run of equal ``keys`` (n,), sorted."""
+    return np.arange(len(keys)) - np.searchsorted(keys, keys)
 
 
 @dataclass(frozen=True)

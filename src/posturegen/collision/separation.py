@@ -12,7 +12,7 @@ import pinocchio as pin
 from .._cache import BoundedCache, Ref
 from ..model.kinematics import scratch_data
 from ..model.robot import Robot
-from .proxies import ProxyModel
+from .proxies import Close, ProxyModel
 
 SEPARATION = 0.03  # [m] how far above its clearance the first start puts each close pair
 SEPARATED_PER_LINK = 2  # the closest sphere pairs of each joint pair that the start parts
@@ -32,22 +32,19 @@ def _support(model: pin.Model, contact_joints: list[int]) -> set[int]:
     return support
 
 
-def _free_joints(model: pin.Model, contact_joints: list[int]) -> tuple[np.ndarray, np.ndarray]:
-    """Velocity and configuration indices of the one-coordinate joints that are not on a
-    chain from the base to a contact joint."""
-    support = _support(model, contact_joints)
+def _free_joints(model: pin.Model, support: set[int]) -> tuple[np.ndarray, np.ndarray]:
+    """Velocity and configuration indices of the one-coordinate joints that are not in
+    ``support`` (the chains from the base to the contact joints)."""
     free = [j for j in range(2, model.njoints) if j not in support and model.joints[j].nq == 1]
     movable = np.array([model.joints[j].idx_v for j in free], dtype=int)
     return movable, np.array([model.joints[j].idx_q for j in free], dtype=int)
 
 
-def _moved_links(
-    model: pin.Model, pm: ProxyModel, links: np.ndarray, contact_joints: list[int]
-) -> np.ndarray:
-    """The joint pairs of ``links`` that a free joint moves: a pair of links both on the
-    contacts' chains has a zero gradient on the free joints (it never made a row)."""
-    fixed = sorted(_support(model, contact_joints))
-    ends = np.isin(pm.joint_pairs[links], fixed)  # (k, 2)
+def _moved_links(pm: ProxyModel, links: np.ndarray, support: set[int]) -> np.ndarray:
+    """The joint pairs of ``links`` that a free joint moves: a pair of links both in
+    ``support`` (the contacts' chains) has a zero gradient on the free joints (it never made
+    a row)."""
+    ends = np.isin(pm.joint_pairs[links], sorted(support))  # (k, 2)
     return np.asarray(links)[~(ends[:, 0] & ends[:, 1])]
 
 
@@ -83,13 +80,14 @@ def separated_start(
         return hit.copy()
     model = robot.model
     data = scratch_data(model)
-    movable, movable_q = _free_joints(model, contact_joints)
+    support = _support(model, contact_joints)
+    movable, movable_q = _free_joints(model, support)
     q = np.array(q, dtype=float)
     if movable.size == 0 or len(links) == 0:
         return q[7:]  # nothing to part: not worth a cache entry
     held = pm.pair_clearance(margin)  # (P,) pairs tighter at the reference are left there
     target = np.where(pm.clearance < margin, held, held + SEPARATION)
-    links = _moved_links(model, pm, links, contact_joints)
+    links = _moved_links(pm, links, support)
     for _ in range(SEPARATION_STEPS):
         pin.forwardKinematics(model, data, q)
         centers = pm.centers_world(model, data)
@@ -97,20 +95,38 @@ def separated_start(
         if len(near.d) == 0:
             break
         pin.computeJointJacobians(model, data, q)
-        rows, short = [], []
-        for i, j, link, dk in zip(near.i, near.j, near.link, near.d, strict=True):
-            grad = _pair_gradient(model, data, pm, centers, (int(i), int(j)))
-            if np.linalg.norm(grad[movable]) > 1e-6:  # pairs the free joints can part
-                rows.append(grad[movable])
-                short.append(target[link] - dk)
-        if not rows:
+        system = _shortfalls(model, data, pm, centers, near, movable, target)
+        if system is None:
             break
-        A, b = np.array(rows), np.array(short)
+        A, b = system
         step = A.T @ np.linalg.solve(A @ A.T + 1e-4 * np.eye(len(b)), b)
         q[movable_q] += step * min(1.0, SEPARATION_STEP / max(np.abs(step).max(), 1e-12))
         q[7:] = np.clip(q[7:], robot.q_lower, robot.q_upper)
     _SEPARATED.put(key, q[7:].copy())
     return q[7:]
+
+
+def _shortfalls(
+    model: pin.Model,
+    data: pin.Data,
+    pm: ProxyModel,
+    centers: np.ndarray,
+    near: Close,
+    movable: np.ndarray,
+    target: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """(A (k, m), b (k,)): the gradients on the ``movable`` joints (m,) of the ``near``
+    sphere pairs that the free joints can part, and how far each is below its joint pair's
+    ``target`` [m] (joint Jacobians already in ``data``); None when there is no such pair."""
+    rows, short = [], []
+    for i, j, link, dk in zip(near.i, near.j, near.link, near.d, strict=True):
+        grad = _pair_gradient(model, data, pm, centers, (int(i), int(j)))
+        if np.linalg.norm(grad[movable]) > 1e-6:  # pairs the free joints can part
+            rows.append(grad[movable])
+            short.append(target[link] - dk)
+    if not rows:
+        return None
+    return np.array(rows), np.array(short)
 
 
 def _pair_gradient(
