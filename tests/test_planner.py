@@ -18,11 +18,11 @@ from posturegen.cli import main
 from posturegen.errors import InputError
 from posturegen.model.geometry import ConvexPolygon
 from posturegen.model.robot import load_bundled
-from posturegen.model.scene import Surface
+from posturegen.model.scene import Obstacle, Scene, Surface
 from posturegen.planner import Budget, Goal, default_rules, parse_goal, parse_rules
 from posturegen.planner.command import write_figures
 from posturegen.planner.heuristic import FOCAL, STEP_COST, Heuristic
-from posturegen.planner.layout import Region, pick_target
+from posturegen.planner.layout import HEADROOM, Region, pick_target, regions
 from posturegen.planner.node import FREE, Action, Node, place_of
 from posturegen.planner.rules import is_hand, patch_positions
 from posturegen.planner.search import REVISIT, Search, _Entry
@@ -198,6 +198,81 @@ def test_picked_target_lies_on_the_surface_within_reach(r, anchors, spot, reach)
     if near:
         best = min(np.linalg.norm(p - np.array(spot)) for p in near)
         assert np.linalg.norm(target - np.array(spot)) <= best + 1e-9
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.tuples(
+        st.floats(0.05, 0.6), st.floats(0.05, 0.6), st.floats(-0.6, 0.6), st.floats(-0.6, 0.6)
+    ),
+    st.floats(-0.05, 0.5),
+    st.lists(st.tuples(st.floats(-1.2, 1.2), st.floats(-1.2, 1.2)), min_size=1, max_size=2),
+    st.tuples(st.floats(-1.5, 1.5), st.floats(-1.5, 1.5)),
+)
+def test_no_target_under_a_low_solid_nor_behind_it(box, underside, anchors, spot):
+    """A box over the ground lower than HEADROOM: no target in its footprint, and the straight
+    path from some anchor within reach to the target does not cross it; a box higher than
+    HEADROOM (or sunk under the ground) takes nothing away."""
+    sx, sy, x, y = box
+    ground = Surface(
+        "ground",
+        pin.SE3.Identity(),
+        ConvexPolygon([[-1.5, -1.5], [1.5, -1.5], [1.5, 1.5], [-1.5, 1.5]]),
+    )
+    T_box = pin.SE3(np.eye(3), np.array([x, y, underside + 0.05]))
+    scene = Scene({"ground": ground}, (Obstacle("box", np.array([sx, sy, 0.1]), T_box),))
+    region = regions(scene)["ground"]
+    foot = shapely.box(x - sx / 2, y - sy / 2, x + sx / 2, y + sy / 2)
+    anchors_ = [np.array([a, b, 0.0]) for a, b in anchors if not foot.contains(shapely.Point(a, b))]
+    reach = 0.7
+    target = pick_target(region, np.array([*spot, 0.0]), anchors_, reach)
+    cut = -0.1 < underside < HEADROOM
+    assert len(region.cuts) == int(cut)
+    if target is None:
+        return
+    point = shapely.Point(target[0], target[1])
+    if not cut:
+        return
+    assert foot.distance(point) > 1e-6
+    if not anchors_:  # no reach to keep: any point of the ground less the cut
+        return
+    paths = [
+        shapely.LineString([a[:2], target[:2]])
+        for a in anchors_
+        if np.linalg.norm(target - a) <= reach + 1e-9
+    ]
+    assert any(p.intersection(foot).length < 1e-9 for p in paths)
+
+
+def test_a_stairs_ground_target_is_never_under_a_step():
+    """ATLAS' stairs: from soles anywhere in front of the stairs, the ground's target nearest
+    the top step is in front of the first step or beside the flight, never under it."""
+    scene = Scene(
+        {
+            "ground": Surface(
+                "ground",
+                pin.SE3.Identity(),
+                ConvexPolygon([[-1.5, -1.5], [1.5, -1.5], [1.5, 1.5], [-1.5, 1.5]]),
+            ),
+            **{
+                f"step{k}": Surface(
+                    f"step{k}",
+                    pin.SE3(np.eye(3), np.array([0.4567 + 0.163 * (k - 1), 0, 0.12 * k])),
+                    ConvexPolygon([[-0.0815, -0.4], [0.0815, -0.4], [0.0815, 0.4], [-0.0815, 0.4]]),
+                    thickness=0.12,
+                )
+                for k in range(1, 5)
+            },
+        }
+    )
+    areas = regions(scene)
+    flight = shapely.box(0.4567 - 0.0815, -0.4, 0.9457 + 0.0815, 0.4)
+    rng = np.random.default_rng(3)
+    for _ in range(40):
+        anchor = np.array([rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3), 0.08])
+        target = pick_target(areas["ground"], areas["step4"].centre(), [anchor], 0.693)
+        assert target is not None
+        assert flight.distance(shapely.Point(target[0], target[1])) > 0.05
 
 
 def _steps_heuristic():
