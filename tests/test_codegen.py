@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 import yaml
 
-from posturegen import problem_from_dict, solve
+from posturegen import _lifeline, problem_from_dict, solve
 from posturegen._cache import clear_caches
 from posturegen.cli import _demo_dir, main
 from posturegen.errors import InputError
-from posturegen.solver import _lifeline, codegen
+from posturegen.solver import codegen
 from posturegen.solver import compile as compile_module
 from posturegen.solver.compile import _CACHE, symbolic
 
@@ -302,7 +302,8 @@ def test_prune_keeps_the_most_recently_used_libraries(tmp_path, monkeypatch):
 CHILD = """
 import json, os, sys, time, uuid
 from posturegen._cache import clear_caches
-from posturegen.solver import _lifeline, codegen
+from posturegen import _lifeline
+from posturegen.solver import codegen
 from posturegen.solver import compile as compile_module
 from posturegen.cli import _demo_dir
 from posturegen.io.problem_file import load_problem

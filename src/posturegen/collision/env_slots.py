@@ -89,7 +89,13 @@ def _kernels(width: int, nz: int = 0, slots: int = 0, n_links: int = 0) -> dict[
     second = ca.Function(
         "env_slot_second", [lam, *args, J, link, cols], [ca.vec(H), at_h, weights, at_w]
     )
-    return {"value": switched(value), "first": switched(first), "second": switched(second)}
+    return {"value": value, "first": first, "second": second}
+
+
+def kernels(n_links: int, nz: int, slots: int, width: int) -> list[ca.Function]:
+    """The SX kernels that the env rows of these shapes run."""
+    own = _kernels(width, nz, slots, n_links)
+    return [_kernels(width)["value"], own["first"], own["second"]]
 
 
 @memoize("env slot curvatures", 8)
@@ -131,35 +137,36 @@ class _Args:
 
 
 @memoize("env slot values", 8)
-def rows_value(n_links: int, slots: int, width: int) -> ca.Function:
+def rows_value(n_links: int, slots: int, width: int, compiled: bool) -> ca.Function:
     """(slots (20, E), indices (K, E), margin, poses (12N,)) -> rows (E,); a slot runs only
-    when it names a link (else its row is the constant 0, unbounded)."""
+    when it names a link (else its row is the constant 0, unbounded); ``compiled``: its
+    kernels in machine code (:mod:`posturegen.collision.native`)."""
     x = _Args(n_links, slots, width)
-    rows = map_columns(_kernels(width)["value"], slots)(*x.own())
+    rows = map_columns(switched(_kernels(width)["value"], compiled), slots)(*x.own())
     return ca.Function(
         "env_rows", [x.C, x.index, x.margin, x.poses], [rows.T], {"never_inline": True}
     )
 
 
 @memoize("env slot derivatives", 8)
-def rows_derivatives(n_links: int, nz: int, slots: int, width: int) -> dict[str, ca.Function]:
+def rows_derivatives(
+    n_links: int, nz: int, slots: int, width: int, compiled: bool
+) -> dict[str, ca.Function]:
     """The rows' derivatives, functions of :func:`rows_value`'s arguments and the compressed
     Jacobians (6·D·N,): ``first`` -> Jacobian (E, nz); ``second`` (λ (E,) last) -> (∇²λᵀrows
     without the kinematics' second derivatives (nz, nz), F (3N,), G (9N,))."""
-    kernels = _kernels(width, nz, slots, n_links)
+    work = {k: switched(f, compiled) for k, f in _kernels(width, nz, slots, n_links).items()}
     x = _Args(n_links, slots, width)
     lam = ca.MX.sym("lam", slots)
     names, *own = x.own()
     J = x.gathered(x.J_all, "jacobian")
     cols = x.index[x.at["chain"], :]
     index = ca.DM(range(slots)).T
-    g, at = map_columns(kernels["first"], slots)(names, *own, J, index, cols)  # (D, E) each
+    g, at = map_columns(work["first"], slots)(names, *own, J, index, cols)  # (D, E) each
     jac = ca.reshape(scatter_sum(slots * nz, g, at), slots, nz)
     link = ca.fmax(x.C[0, :], 0)
     lam_s = lam.T * names
-    h, at_h, fg, at_fg = map_columns(kernels["second"], slots)(
-        lam_s != 0, lam_s, *own, J, link, cols
-    )
+    h, at_h, fg, at_fg = map_columns(work["second"], slots)(lam_s != 0, lam_s, *own, J, link, cols)
     H = ca.reshape(scatter_sum(nz * nz, h, at_h), nz, nz)
     FG = scatter_sum(12 * n_links, fg, at_fg)
     opts = {"never_inline": True}
@@ -173,21 +180,28 @@ def rows_derivatives(n_links: int, nz: int, slots: int, width: int) -> dict[str,
 
 
 def env_rows(
-    ctx: BuildContext, state: Any, table: RowTable, slots: Any, index: Any, margin: Any
+    ctx: BuildContext,
+    state: Any,
+    table: RowTable,
+    slots: Any,
+    index: Any,
+    margin: Any,
+    compiled: bool = False,
 ) -> tuple[Any, Callable[[], BlockDerivatives]]:
     """The env rows of ``slots`` (20, E) with their ``index`` (K, E) in ``state`` (world:
     z = (p_base, w, qj)), links picked among ``table.links``; and the function that builds
-    their derivatives."""
+    their derivatives; ``compiled``: their kernels in machine code
+    (:mod:`posturegen.collision.native`)."""
     links = [int(j) for j in table.links]
     n, width = slots.shape[1], 6 + table.width
     poses = link_tables(state, links)
-    values = rows_value(len(links), n, width)(slots, index, margin, poses)
+    values = rows_value(len(links), n, width, compiled)(slots, index, margin, poses)
 
     def build() -> BlockDerivatives:
         z = ca.vertcat(ctx.base_position, ctx.base_rotation, ctx.joints)
         J = ctx.kin.twist_jacobians(state, links, ctx.base_rotation)
         columns = [[*range(6), *(6 + c for c in chain)] for chain in table.chains]
-        fns = rows_derivatives(len(links), z.shape[0], n, width)
+        fns = rows_derivatives(len(links), z.shape[0], n, width, compiled)
         J_all = compressed([J[L] for L in links], columns, width)
         jac = fns["first"](slots, index, margin, poses, J_all)
         lam = ca.SX.sym("lam", n)

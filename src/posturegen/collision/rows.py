@@ -46,8 +46,11 @@ import numpy as np
 from ..terms.nlp import BuildContext, Instance, Term
 from .boxes import EnvBox
 from .env_slots import env_rows
+from .env_slots import kernels as env_kernels
+from .native import have, ready
 from .proxies import ProxyModel
 from .self_blocks import INDEX_NAMES, self_rows
+from .self_blocks import kernels as self_kernels
 from .slots import (
     SELF_SLOT_BLOCK,
     Capacity,
@@ -99,6 +102,7 @@ class CollisionTerm(Term):
         nlp = ctx.nlp
         margin = nlp.parameter("collision.margin", 1)
         B, E, D = self.capacity.self_blocks, self.capacity.env_slots, self.table.width
+        native_self, native_env = self._native(ctx)
         if B:
             params = [
                 ca.reshape(nlp.parameter("collision.self_links", 2 * B), 2, B),
@@ -119,14 +123,35 @@ class CollisionTerm(Term):
                 )
             # self distances do not depend on the base: computed in its frame, which keeps the
             # base pose and its exponential map out of these rows' Hessians
-            value, deriv = self_rows(ctx, ctx.base_frame_state(), self.table, params)
+            value, deriv = self_rows(ctx, ctx.base_frame_state(), self.table, params, native_self)
             nlp.constrain("collision.self", value, 0.0, np.inf, deriv)
         if E:
             slots = ca.reshape(nlp.parameter("collision.env_slots", 20 * E), 20, E)
             rows = env_index_rows(6 + D)["chain"].stop
             index = ca.reshape(nlp.parameter("collision.env_index", rows * E), rows, E)
-            value, deriv = env_rows(ctx, ctx.state, self.table, slots, index, margin)
+            value, deriv = env_rows(ctx, ctx.state, self.table, slots, index, margin, native_env)
             nlp.constrain("collision.env", value, 0.0, np.inf, deriv)
+
+    def _native(self, ctx: BuildContext) -> tuple[bool, bool]:
+        """Whether the self rows and the env rows run their kernels in machine code: in a
+        program for the virtual machine (BuildContext.native_kernels), once they are compiled
+        (posturegen.collision.native: those missing are sent to a builder process, and the
+        virtual machine runs them until then)."""
+        if not ctx.native_kernels:
+            return False, False
+        n_links, nz, D = len(self.table.links), ctx.joints.shape[0], self.table.width
+        own = (
+            self_kernels(n_links, nz, len(self.table.rows), D) if self.capacity.self_blocks else []
+        )
+        env = (
+            env_kernels(n_links, nz + 6, self.capacity.env_slots, 6 + D)
+            if self.capacity.env_slots
+            else []
+        )
+        ready(own + env)
+        out = have(own), have(env)
+        ctx.kernels_pending = ctx.kernels_pending or not all(out)
+        return out
 
     def self_groups(self) -> list[tuple[tuple[int, int], list[tuple[int, int]]]]:
         """The self rows, one per pair of limbs, with the sphere pairs held in each (none in

@@ -137,7 +137,7 @@ def _value_kernel(n: int) -> ca.Function:
     """(whether the block joins links, then :func:`_symbols` without Jacobians) -> u, its
     smooth minimum, run only for a block that joins links (else 0)."""
     plain = _symbols(n, 0)
-    return switched(ca.Function("self_block_value", plain, [_geometry(plain)["u"]]))
+    return ca.Function("self_block_value", plain, [_geometry(plain)["u"]])
 
 
 @memoize("self block kernels", 4)
@@ -181,7 +181,7 @@ def _kernels(n: int, width: int, nz: int, rows: int, n_links: int) -> dict[str, 
         3 * n_links + 9 * ib + ca.DM(range(9)),
     )
     second = ca.Function("self_block_second", [mu, *args, *where], [blocks, at_h, weights, at_w])
-    return {"first": switched(first), "second": switched(second)}
+    return {"first": first, "second": second}
 
 
 def _upper_scatter(Haa: Any, Hab: Any, Hbb: Any, ca_: Any, cb: Any, n: int) -> tuple[Any, Any]:
@@ -248,12 +248,13 @@ class _Args:
             self.clear.T,
         ]
 
-    def smooth_minima(self) -> tuple[Any, Any, Any]:
+    def smooth_minima(self, compiled: bool) -> tuple[Any, Any, Any]:
         """(rows (R,), each block's weight in its row (1, B), its row (1, B), sanitized):
         row k = softmin_β over its blocks' u_b with one shift m for all rows (the smallest
         u), each u_b - m clamped at CLAMP (see the module doc); a free row FREE_ROW."""
         joins = self.links[0, :] >= 0
-        u = map_columns(_value_kernel(SELF_SLOT_BLOCK), self.blocks)(joins, *self.own())
+        kernel = switched(_value_kernel(SELF_SLOT_BLOCK), compiled)
+        u = map_columns(kernel, self.blocks)(joins, *self.own())
         u = u + (1 - joins) * DUMMY_GAP
         m = ca.mmin(u)
         e = ca.exp(-SOFT_MIN_BETA * ca.fmin(u - m, CLAMP))
@@ -265,26 +266,30 @@ class _Args:
 
 
 @memoize("self row values", 8)
-def rows_value(n_links: int, blocks: int, rows: int, width: int) -> ca.Function:
+def rows_value(n_links: int, blocks: int, rows: int, width: int, compiled: bool) -> ca.Function:
     """(links (2, B), rows (B,), slots (7, 16·B), clearances (B,), free rows (R,), each
-    kind of indices (INDEX_NAMES), poses (12N,)) -> the rows (R,)."""
+    kind of indices (INDEX_NAMES), poses (12N,)) -> the rows (R,); ``compiled``: its
+    kernels in machine code (:mod:`posturegen.collision.native`)."""
     x = _Args(n_links, blocks, rows, width)
-    values, _, _ = x.smooth_minima()
+    values, _, _ = x.smooth_minima(compiled)
     return ca.Function("self_rows", [*x.params(), x.poses], [values], {"never_inline": True})
 
 
 @memoize("self row derivatives", 8)
 def rows_derivatives(
-    n_links: int, nz: int, blocks: int, rows: int, width: int
+    n_links: int, nz: int, blocks: int, rows: int, width: int, compiled: bool
 ) -> dict[str, ca.Function]:
     """The rows' derivatives, functions of :func:`rows_value`'s arguments and the compressed
     Jacobians (6·D·N,): ``first`` -> Jacobian (R, nz); ``second`` (λ (R,) last) -> (the upper
     triangle of ∇²λᵀrows without the kinematics' second derivatives (nz, nz; its lower
     triangle zero), F (3N,), G (9N,)) (see the module doc)."""
-    kernels = _kernels(SELF_SLOT_BLOCK, width, nz, rows, n_links)
+    work = {
+        k: switched(f, compiled)
+        for k, f in _kernels(SELF_SLOT_BLOCK, width, nz, rows, n_links).items()
+    }
     x = _Args(n_links, blocks, rows, width)
     lam = ca.MX.sym("lam", rows)
-    _, weight, row = x.smooth_minima()
+    _, weight, row = x.smooth_minima(compiled)
     links = ca.fmax(x.links, 0)
     own = [
         *x.own(),
@@ -295,14 +300,16 @@ def rows_derivatives(
         x.index["chain"],
     ]
     counts = weight > WEIGHT_FLOOR  # (1, B) the blocks whose derivatives run
-    g, at = map_columns(kernels["first"], blocks)(counts, *own)  # (2D, B) each
+    g, at = map_columns(work["first"], blocks)(counts, *own)  # (2D, B) each
     g = g * ca.repmat(weight, 2 * width, 1)
     jac = ca.reshape(scatter_sum(rows * nz, g, at), rows, nz)
     mu = ca.reshape(lam.get_nz(False, ca.vec(row)), 1, blocks) * weight
-    h, at_h, fg, at_fg = map_columns(kernels["second"], blocks)(counts * (mu != 0), mu, *own)
+    h, at_h, fg, at_fg = map_columns(work["second"], blocks)(counts * (mu != 0), mu, *own)
     H = scatter_sum(nz * nz, h, at_h)
     c = SOFT_MIN_BETA * lam.T
-    upper = map_columns(_rank_one(nz), rows)(c != 0, c, jac.T)  # (nz(nz+1)/2, R)
+    upper = map_columns(switched(_rank_one(nz), compiled), rows)(
+        c != 0, c, jac.T
+    )  # (nz(nz+1)/2, R)
     H = H + scatter_sum(nz * nz, upper, ca.repmat(_upper_index(nz), 1, rows))
     H = ca.reshape(H, nz, nz)  # the upper triangle (the lower one is zero)
     FG = scatter_sum(12 * n_links, fg, at_fg)
@@ -328,7 +335,13 @@ def _rank_one(nz: int) -> ca.Function:
     only when c ≠ 0 (a row whose multiplier is 0 adds nothing)."""
     c, g = ca.SX.sym("c"), ca.SX.sym("g", nz)
     upper = [c * g[i] * g[j] for j in range(nz) for i in range(j + 1)]
-    return switched(ca.Function("self_row_rank_one", [c, g], [ca.vertcat(*upper)]))
+    return ca.Function("self_row_rank_one", [c, g], [ca.vertcat(*upper)])
+
+
+def kernels(n_links: int, nz: int, rows: int, width: int) -> list[ca.Function]:
+    """The SX kernels that the self rows of these shapes run (every capacity: the same)."""
+    own = _kernels(SELF_SLOT_BLOCK, width, nz, rows, n_links)
+    return [_value_kernel(SELF_SLOT_BLOCK), own["first"], own["second"], _rank_one(nz)]
 
 
 def link_tables(state: Any, links: list[int]) -> Any:
@@ -338,22 +351,23 @@ def link_tables(state: Any, links: list[int]) -> Any:
 
 
 def self_rows(
-    ctx: BuildContext, state: Any, table: RowTable, params: list[Any]
+    ctx: BuildContext, state: Any, table: RowTable, params: list[Any], compiled: bool = False
 ) -> tuple[Any, Callable[[], BlockDerivatives]]:
     """The self rows of the blocks of ``params`` (links (2, B), rows (B,), slots (7, 16·B),
     clearances (B,), free rows (R,), each kind of indices (INDEX_NAMES)) in ``state`` (fixed
     base: z = qj), links among ``table.links`` (the joints that carry spheres); and the
-    function that builds their derivatives."""
+    function that builds their derivatives; ``compiled``: their kernels in machine code
+    (:mod:`posturegen.collision.native`)."""
     links = [int(j) for j in table.links]
     blocks, n_rows = params[1].shape[0], params[4].shape[0]
     poses = link_tables(state, links)
-    values = rows_value(len(links), blocks, n_rows, table.width)(*params, poses)
+    values = rows_value(len(links), blocks, n_rows, table.width, compiled)(*params, poses)
 
     def build() -> BlockDerivatives:
         J = ctx.kin.twist_jacobians(state, links, None)
         columns = [list(c) for c in table.chains]
         nz = ctx.joints.shape[0]
-        fns = rows_derivatives(len(links), nz, blocks, n_rows, table.width)
+        fns = rows_derivatives(len(links), nz, blocks, n_rows, table.width, compiled)
         J_all = compressed([J[L] for L in links], columns, table.width)
         jac = fns["first"](*params, poses, J_all)
         lam = ca.SX.sym("lam", n_rows)

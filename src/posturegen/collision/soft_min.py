@@ -15,6 +15,7 @@ import casadi as ca
 import numpy as np
 
 from .boxes import BETA
+from .native import native
 
 # [1/m] sharpness of the smooth minimum over a link pair's sphere pairs: conservative by at most
 # log(n)/β (n sphere pairs, 1.5 cm for 20), by much less when one pair is the closest by a few
@@ -76,10 +77,13 @@ def gated(heavy: ca.Function, when: Callable[[list[Any]], Any] | None = None) ->
     return ca.Function(f"{heavy.name()}_gated", args, outs, {"never_inline": True})
 
 
-def switched(heavy: ca.Function) -> ca.Function:
+def switched(heavy: ca.Function, compiled: bool = False) -> ca.Function:
     """(index, *heavy's arguments) -> ``heavy``'s outputs when index is 1, zeros (without
     evaluating it) when 0: a switch, a branch of the generated C, whose outputs land where
-    its caller wants them (a map's columns: no copy)."""
+    its caller wants them (a map's columns: no copy). ``compiled``: ``heavy`` in machine
+    code on the virtual machine (:func:`posturegen.collision.native.native`)."""
+    if compiled:
+        heavy = native(heavy)
     zero = ca.Function(
         f"{heavy.name()}_zero",
         [ca.SX.sym(f"i{k}", heavy.sparsity_in(k)) for k in range(heavy.n_in())],

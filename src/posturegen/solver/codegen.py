@@ -30,8 +30,9 @@ Modes (:attr:`posturegen.solver.problem.SolverOptions.codegen`, else ``$POSTUREG
 - ``background``: the virtual machine solves while the library compiles in a background
   thread, started at the structure's first use; the next solve after the build switches to
   it (a single solve never waits for a compiler);
-- ``cached``: a structure's library when the disk cache has it, else the virtual machine;
-  nothing is compiled. The planner's mode (a plan meets each structure a few times): measured
+- ``cached``: a structure's library when the disk cache has it, else the virtual machine
+  (its collision kernels in machine code once compiled: :mod:`posturegen.collision.native`);
+  no program is compiled. The planner's mode (a plan meets each structure a few times): measured
   2026-12-04, ATLAS' stairs of 2 steps planned with an empty cache, 9 postures on 10
   structures, took 10.7 s on the virtual machine against 162.8 s in mode ``auto`` (159 s of
   it compiling) and 29.4 s in mode ``background`` (the compiler on the other core, the
@@ -45,7 +46,7 @@ functions IPOPT never calls in a solve but ``nlpsol`` requires (the program itse
 gradient, for the multipliers of the parameters) at ``-O0``. The sources compile in parallel,
 the largest first.
 
-The compilers never outlive the process that started them (:mod:`posturegen.solver._lifeline`): each
+The compilers never outlive the process that started them (:mod:`posturegen._lifeline`): each
 runs in its own process group, killed at exit, and by a watchdog when the process ends any
 other way (SIGTERM, SIGKILL); a build that takes longer than ``COMPILE_TIMEOUT_S`` is killed
 and counts as failed (the virtual machine solves on).
@@ -70,8 +71,9 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from .. import _lifeline
+from .._compiler import cache_root, compiler
 from ..errors import InputError
-from . import _lifeline
 
 CODEGEN_VERSION = 2  # 2: the outputs function in the library, the layout beside it
 MODES = ("auto", "sync", "background", "cached", "off")
@@ -90,16 +92,7 @@ COMPILE_TIMEOUT_S = 600.0  # a library's build (compilation and link) that takes
 def cache_dir() -> Path:
     """Where compiled libraries are cached: $POSTUREGEN_CACHE/solvers, else
     ~/.cache/posturegen/solvers."""
-    root = os.environ.get("POSTUREGEN_CACHE") or Path.home() / ".cache" / "posturegen"
-    return Path(root) / "solvers"
-
-
-def compiler() -> str | None:
-    """The C compiler: $CC, else gcc, else cc (None when none is on the PATH)."""
-    for name in (os.environ.get("CC"), "gcc", "cc"):
-        if name and (path := shutil.which(name)):
-            return path
-    return None
+    return cache_root() / "solvers"
 
 
 def resolve_mode(option: str | None) -> str:

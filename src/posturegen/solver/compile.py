@@ -19,6 +19,7 @@ import casadi as ca
 import numpy as np
 
 from .._cache import BoundedCache
+from ..collision import native
 from ..errors import SolveError
 from ..model.robot import Robot
 from ..terms.elastic import Elastic, soften
@@ -82,6 +83,7 @@ class CompiledNLP(_Layout):
     codegen_mode: str = "off"
     library_key: str | None = None  # content hash of the program (None: codegen off)
     library: bool = False  # solver runs the compiled library
+    kernels_epoch: int | None = None  # as _Program's: built again once it is stale
     uses: int = 0  # solves of this structure in this process
     # one IPOPT run of this solver at a time: its stats() are those of the last call
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
@@ -125,6 +127,9 @@ class _Program(_Layout):
     outputs: ca.Function  # (x, p) -> outputs and cost terms
     # the declared pieces, kept for derivative_functions (built on first use)
     declared: NLP | None = None
+    # the kernels' epoch (posturegen.collision.native.epoch) when they were wanted in machine
+    # code but still being compiled: declared again once it has changed (None: nothing waits)
+    kernels_epoch: int | None = None
     _derivatives: dict[str, ca.Function] | None = field(default=None, repr=False)
 
     @property
@@ -176,7 +181,7 @@ def compile_program(program: Compilable) -> CompiledNLP:
     cached; the symbolic program is shared by every solver-option variant)."""
     key = program.key()
     cached = _CACHE.get(key)
-    if cached is not None:
+    if cached is not None and not _stale(cached.kernels_epoch):
         return cached
     t0 = time.perf_counter()
     opts = program.solver_options.ipopt()
@@ -197,6 +202,7 @@ def compile_program(program: Compilable) -> CompiledNLP:
         codegen_mode=mode,
         library_key=built.library_key,
         library=built.library,
+        kernels_epoch=None if built.library else getattr(layout, "kernels_epoch", None),
     )
     return _CACHE.put(key, compiled)
 
@@ -282,8 +288,7 @@ def _agree(solver: ca.Function, layout: _Layout) -> bool:
 def layout_of(program: Compilable) -> _Layout:
     """The layout of the program's structure: from this process's caches, else from beside
     its library on disk, else from its symbolic program (declared and cached)."""
-    k = program.key()[:3]
-    found = _PROGRAMS.get(k) or _LAYOUTS.get(k)
+    found = _PROGRAMS.get(_program_key(program)) or _LAYOUTS.get(program.key()[:3])
     if found is not None:
         return found
     if program.solver_options.codegen_mode() != "off":
@@ -303,7 +308,8 @@ def _disk_layout(program: Compilable, lib_key: str) -> _Layout | None:
         layout = _read_layout(lib_key)
         if layout is not None:
             _LAYOUTS.put(k, layout)
-            MADE["loaded"] += k not in _PROGRAMS  # a structure declared here is not new
+            # a structure declared here is not new
+            MADE["loaded"] += _program_key(program) not in _PROGRAMS
     return layout
 
 
@@ -337,8 +343,32 @@ def _read_layout(lib_key: str) -> _Layout | None:
 
 
 def symbolic(program: Compilable) -> _Program:
-    """The symbolic program of this structure (declared once, then cached)."""
-    return _PROGRAMS.get_or_make(program.key()[:3], lambda: _declare(program))
+    """The symbolic program of this structure (declared once, then cached; again when its
+    collision kernels were being compiled and some builder has finished since)."""
+    key = _program_key(program)
+    found = _PROGRAMS.get(key)
+    if found is None or _stale(found.kernels_epoch):
+        found = _PROGRAMS.put(key, _declare(program))
+    return found
+
+
+def _stale(kernels_epoch: int | None) -> bool:
+    """Whether something declared at ``kernels_epoch`` could now have compiled kernels."""
+    return kernels_epoch is not None and kernels_epoch != native.epoch()
+
+
+def _program_key(program: Compilable) -> tuple[Any, ...]:
+    """What a symbolic program is cached under: its structure, and whether its collision
+    kernels run in machine code (the same arithmetic, :mod:`posturegen.collision.native`)."""
+    return (*program.key()[:3], native_kernels(program))
+
+
+def native_kernels(program: Compilable) -> bool:
+    """Whether the program's collision kernels are compiled: when the program runs on the
+    virtual machine while a C compiler is at hand (codegen modes ``cached``, ``background``).
+    In ``auto`` and ``sync`` its library is built before its first solve; in ``off`` nothing
+    is compiled."""
+    return program.solver_options.codegen_mode() in ("cached", "background")
 
 
 # the program of the terms declared first (Term.late: the others come after), per robot and
@@ -349,6 +379,7 @@ _EARLY: BoundedCache[BuildContext] = BoundedCache("programs without the late ter
 def _declare(program: Compilable) -> _Program:
     """Every term declares its pieces; the program's vectors, functions and layout."""
     MADE["declared"] += 1
+    epoch = native.epoch()  # before the kernels are looked for
     terms = list(enumerate(program.terms()))
 
     def declare(ctx: BuildContext, which: list[tuple[int, Term]]) -> BuildContext:
@@ -362,7 +393,9 @@ def _declare(program: Compilable) -> _Program:
         return declare(ctx, [(i, t) for i, t in terms if not t.late])
 
     key = (program.key()[0], tuple((i, t.key()) for i, t in terms if not t.late))
-    ctx = declare(_EARLY.get_or_make(key, make).extended(), [(i, t) for i, t in terms if t.late])
+    ctx = _EARLY.get_or_make(key, make).extended()
+    ctx.native_kernels = native_kernels(program)
+    ctx = declare(ctx, [(i, t) for i, t in terms if t.late])
     nlp = ctx.nlp.ordered()  # the late terms' blocks where their terms stand
     if program.elastic is not None:
         soften(nlp, program.elastic)
@@ -393,6 +426,7 @@ def _declare(program: Compilable) -> _Program:
         lbg=np.concatenate([v[1] for v in nlp.g.values()]),
         ubg=np.concatenate([v[2] for v in nlp.g.values()]),
         declared=nlp,
+        kernels_epoch=epoch if ctx.kernels_pending else None,
     )
 
 

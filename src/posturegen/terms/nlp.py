@@ -148,6 +148,10 @@ class BuildContext:
     # (joint id, world point (3,), world force on the robot (3,)) of every force-bearing point
     force_points: list[tuple[int, ca.SX, ca.SX]] = field(default_factory=list)
     torques: ca.SX | None = None  # (nj,) actuated joint torques, set by the equilibrium
+    # the collision rows' kernels in machine code (a program for the virtual machine:
+    # posturegen.collision.native)
+    native_kernels: bool = False
+    kernels_pending: bool = False  # wanted in machine code, still being compiled
     # the joint placements in the base's frame (fixed base at the origin), made once for a
     # context and its extensions (the list is shared)
     _base_frame: list[KinematicState] = field(default_factory=list)

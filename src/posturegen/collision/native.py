@@ -1,0 +1,235 @@
+"""The collision rows' kernels in machine code, compiled once per machine and kept on disk.
+
+A program that runs on CasADi's virtual machine (codegen modes ``cached`` and ``background``,
+:mod:`posturegen.solver.codegen`: the planner's, where nearly every posture is a structure
+never compiled) spends most of an iteration in its collision rows: on Talos' touch of step 3
+(55 variables, 50 collision rows of 128) the Hessian of the Lagrangian took 2.4 ms a call
+against 0.3 ms without the rows. The rows' work is done by a few SX kernels
+(:mod:`~.self_blocks`, :mod:`~.env_slots`) whose shapes depend on the robot, not on the
+structure nor (self rows) on the capacity. Compiled (CasADi's ``jit``, the library kept beside
+the saved function, so that a later process opens it in milliseconds) the same Hessian took
+0.83 ms, and the same 521 iterations gave the same posture bit for bit: the C runs the virtual
+machine's operations in the same order (no fast-math, no contraction into fused
+multiply-adds).
+
+A kernel is keyed by the SHA-256 of its serialized function, CasADi's version, the machine and
+the flags, and kept in ``$POSTUREGEN_CACHE/kernels`` (else ``~/.cache/posturegen/kernels``),
+the least recently used deleted beyond MAX_CACHE_BYTES. The kernels a program needs and that
+the disk does not hold are compiled by a builder process of their own (:func:`ready`), on the
+other core, while the programs declared meanwhile run them on the virtual machine: Talos' set
+took 4.1 s at ``-O1`` (``-O0``: 2.0 s, but the Hessian at 1.4 ms), a wait no plan should
+make. Without a C compiler, or when a build fails, the kernels stay on the virtual machine.
+"""
+
+from __future__ import annotations
+
+import atexit
+import hashlib
+import os
+import platform
+import shutil
+import sys
+import tempfile
+import threading
+from pathlib import Path
+
+import casadi as ca
+
+from .. import _lifeline
+from .._cache import BoundedCache, Ref
+from .._compiler import cache_root, compiler
+
+FLAGS = ("-O1", "-ffp-contract=off")
+MAX_CACHE_BYTES = 256 << 20  # a robot's set is 2-5 MB
+SAVED = "kernel.casadi"  # in each kernel's folder, beside its library
+_NATIVE: BoundedCache[ca.Function] = BoundedCache("native kernels", 64)
+_DIGESTS: BoundedCache[str] = BoundedCache("kernel digests", 64)
+_LOCK = threading.Lock()
+_BUILDERS: dict[str, object] = {}  # digest -> the builder process making it
+_FAILED: set[str] = set()
+_FINISHED = [0]  # builder processes done in this process
+
+
+def kernel_dir() -> Path:
+    """Where compiled kernels are kept."""
+    return cache_root() / "kernels"
+
+
+def ready(kernels: list[ca.Function]) -> bool:
+    """Whether every kernel's machine code is at hand (in this process, else loaded from the
+    disk); when not, the missing ones are sent to a builder process (once) and False."""
+    missing = []
+    for kernel in kernels:
+        digest = digest_of(kernel)
+        if _NATIVE.get(digest) is None:
+            loaded = _from_disk(kernel.name(), digest)
+            if loaded is None:
+                missing.append((digest, kernel))
+            else:
+                _NATIVE.put(digest, loaded)
+    if not missing:
+        return True
+    _build_in_background(missing)
+    return False
+
+
+def epoch() -> int:
+    """How many builder processes have finished in this process: a program declared while its
+    kernels were being built is declared again once this has changed."""
+    with _LOCK:
+        _reap()
+        return _FINISHED[0]
+
+
+def _reap() -> set[str]:
+    """The digests whose builder has finished, now forgotten (under _LOCK)."""
+    done = {d for d, proc in _BUILDERS.items() if _lifeline.finished(proc)}  # type: ignore[arg-type]
+    _FINISHED[0] += len({id(_BUILDERS[d]) for d in done})
+    for digest in done:
+        del _BUILDERS[digest]
+    return done
+
+
+def have(kernels: list[ca.Function]) -> bool:
+    """Whether :func:`ready` found every kernel's machine code."""
+    return all(_NATIVE.get(digest_of(k)) is not None for k in kernels)
+
+
+def native(kernel: ca.Function) -> ca.Function:
+    """The machine code of ``kernel`` that :func:`ready` found; ``kernel`` itself otherwise.
+    Its derivatives and its generated C are those of ``kernel``."""
+    return _NATIVE.get(digest_of(kernel)) or kernel
+
+
+def digest_of(kernel: ca.Function) -> str:
+    """The kernel's key: SHA-256 of its serialized function, CasADi's version, the machine and
+    the flags (20 hex digits)."""
+
+    def make() -> str:
+        h = hashlib.sha256(repr((ca.__version__, platform.machine(), FLAGS)).encode())
+        h.update(kernel.serialize().encode())
+        return h.hexdigest()[:20]
+
+    return _DIGESTS.get_or_make(Ref(kernel), make)
+
+
+def wait(timeout: float | None = None) -> bool:
+    """Wait until the builder processes are done; False when ``timeout`` [s] ran out first."""
+    with _LOCK:
+        procs = set(_BUILDERS.values())
+    for proc in procs:
+        try:
+            proc.wait(timeout)  # type: ignore[attr-defined]
+        except Exception:  # noqa: BLE001 - subprocess.TimeoutExpired
+            return False
+        _lifeline.finished(proc)  # type: ignore[arg-type]
+    return True
+
+
+def _from_disk(name: str, digest: str) -> ca.Function | None:
+    """The compiled kernel of ``digest`` from its folder, else None."""
+    for path in sorted(kernel_dir().glob(f"{name}-{digest}-*/{SAVED}")):
+        try:
+            loaded = ca.Function.load(str(path))
+        except RuntimeError:  # unreadable (its library moved, another CasADi): built again
+            shutil.rmtree(path.parent, ignore_errors=True)
+            continue
+        os.utime(path.parent)  # recently used
+        return loaded
+    return None
+
+
+def _build_in_background(missing: list[tuple[str, ca.Function]]) -> None:
+    """Start one builder process for the kernels not yet sent to one (nor failed)."""
+    cc = compiler()
+    wanted = {d for d, _ in missing}
+    with _LOCK:
+        _FAILED.update(_reap() & wanted)  # their builder is done, yet they are not on the disk
+        todo = [(d, k) for d, k in missing if d not in _BUILDERS and d not in _FAILED]
+        if cc is None or not todo:
+            return
+        root = kernel_dir()
+        root.mkdir(parents=True, exist_ok=True)
+        jobs = Path(tempfile.mkdtemp(prefix=".jobs-", dir=root))
+        for digest, kernel in sorted(todo, key=lambda t: -t[1].n_nodes()):  # largest first
+            kernel.save(str(jobs / f"{len(os.listdir(jobs)):02d}-{digest}.casadi"))
+        cmd = ["nice", "-n", "5"] if shutil.which("nice") else []
+        cmd += [sys.executable, "-m", __name__, str(jobs), cc]
+        proc = _lifeline.spawn(cmd, jobs / "builder.log")
+        for digest, _ in todo:
+            _BUILDERS[digest] = proc
+
+
+def build(kernel: ca.Function, digest: str, cc: str) -> Path:
+    """Compile ``kernel`` with ``cc`` into a folder of its own in the cache: its library and
+    the function that runs it (saved last: a folder without it is a build in progress or a
+    failed one; concurrent builders each make their own). Returns the saved function."""
+    root = kernel_dir()
+    root.mkdir(parents=True, exist_ok=True)
+    folder = Path(tempfile.mkdtemp(prefix=f"{kernel.name()}-{digest}-", dir=root))
+    try:
+        args = kernel.sx_in()
+        options = {
+            "jit": True,
+            "compiler": "shell",
+            "jit_serialize": "link",  # the saved function opens the library where it is
+            "jit_name": kernel.name(),
+            "jit_temp_suffix": False,
+            "jit_cleanup": False,
+            "jit_options": {
+                "compiler": cc,
+                "flags": list(FLAGS),
+                "directory": str(folder) + os.sep,
+                "cleanup": False,
+                "verbose": False,
+            },
+        }
+        compiled = ca.Function(kernel.name(), args, kernel.call(args), options)
+        for source in (*folder.glob("*.c"), *folder.glob("*.o")):
+            source.unlink()
+        compiled.save(str(folder / f"{SAVED}.partial"))
+        os.replace(folder / f"{SAVED}.partial", folder / SAVED)
+    except BaseException:
+        shutil.rmtree(folder, ignore_errors=True)
+        raise
+    _prune()
+    return folder / SAVED
+
+
+def _prune() -> None:
+    """Delete the least recently used kernels beyond MAX_CACHE_BYTES in all."""
+    try:
+        folders = sorted(
+            (p for p in kernel_dir().iterdir() if (p / SAVED).is_file()),
+            key=lambda p: -p.stat().st_mtime,
+        )
+        total = 0
+        for folder in folders:
+            total += sum(f.stat().st_size for f in folder.iterdir())
+            if total > MAX_CACHE_BYTES:
+                shutil.rmtree(folder, ignore_errors=True)
+    except OSError:
+        pass
+
+
+@atexit.register
+def _stop() -> None:
+    """At exit: stop the builders (their half-made folders are left without SAVED)."""
+    with _LOCK:
+        procs = set(_BUILDERS.values())
+    for proc in procs:
+        _lifeline.kill(proc)  # type: ignore[arg-type]
+
+
+def _main(jobs: Path, cc: str) -> None:
+    """The builder process: compile each job of ``jobs`` in order, then remove the folder."""
+    try:
+        for job in sorted(jobs.glob("*.casadi")):
+            digest = job.stem.split("-", 1)[1]
+            build(ca.Function.load(str(job)), digest, cc)
+    finally:
+        shutil.rmtree(jobs, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    _main(Path(sys.argv[1]), sys.argv[2])
