@@ -21,6 +21,7 @@ import yaml
 from posturegen import _lifeline, problem_from_dict, solve
 from posturegen._cache import clear_caches
 from posturegen.cli import _demo_dir, main
+from posturegen.collision import native
 from posturegen.errors import InputError
 from posturegen.solver import codegen
 from posturegen.solver import compile as compile_module
@@ -52,6 +53,7 @@ def cache(tmp_path_factory):
     _CACHE.clear()
     yield path
     codegen.wait()
+    native.wait()
     _CACHE.clear()
     mp.undo()
 
@@ -385,6 +387,7 @@ def test_compilers_do_not_outlive_their_process(how, tmp_path):
 
 @needs_cc
 def test_a_build_past_its_timeout_is_killed(cache, monkeypatch):
+    assert native.wait(300)  # kernels built for earlier tests: no child of ours left running
     compiled = _problem("off").compile()
     key = codegen.library_key(compiled.nlp, "timeout test")
     groups: list[int] = []

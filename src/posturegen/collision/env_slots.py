@@ -59,20 +59,20 @@ def _slot(p: Any, R: Any, column: Any, margin: Any) -> dict[str, Any]:
 
 
 @memoize("env slot kernels", 8)
-def _kernels(width: int, nz: int = 0, slots: int = 0, n_links: int = 0) -> dict[str, ca.Function]:
+def _kernels(width: int, nz: int = 0, n_links: int = 0) -> dict[str, ca.Function]:
     """A slot's SX work at its link's pose p (3,), R (9,) (column-major), its parameters
     ``column`` (20,) and the margin, each behind a switch (its index first: whether the slot
     names a link, for ``second`` whether its λ ≠ 0; zeros at index 0 otherwise): ``value`` ->
-    row; ``first`` (then the link's compressed twist Jacobian (6·width,), the slot's index and
-    its link's columns in z (width,)) -> (∇row on them, their indices in the rows' Jacobian
-    (E, nz)); ``second`` (λ, then the arguments, the Jacobian, the link and its columns) ->
+    row; ``first`` (then the link's compressed twist Jacobian (6·width,)) -> ∇row on its
+    link's columns in z (width,) (the same for every capacity); ``second`` (λ, then the
+    arguments, the Jacobian, the link and its columns) ->
     (∇²(λ·row) on them without the kinematics' second derivatives (width², column-major),
     their indices in the (nz, nz) Hessian, [μg, vec(μ g sᵢᵀ)] (12,), their indices in
     [F (3N,), G (9N,)])."""
     p, R = ca.SX.sym("p", 3), ca.SX.sym("R", 9)
     column, margin = ca.SX.sym("column", 20), ca.SX.sym("margin")
     J, lam = ca.SX.sym("J", 6 * width), ca.SX.sym("lam")
-    index, link, cols = ca.SX.sym("s"), ca.SX.sym("link"), ca.SX.sym("cols", width)
+    link, cols = ca.SX.sym("link"), ca.SX.sym("cols", width)
     s = _slot(p, ca.reshape(R, 3, 3), column, margin)
     e, W, rho = s["element"], s["W"], s["rho"]
     gW = W * e.grad
@@ -81,7 +81,7 @@ def _kernels(width: int, nz: int = 0, slots: int = 0, n_links: int = 0) -> dict[
     args = [p, R, column, margin]
     value = ca.Function("env_slot_value", args, [s["row"]])
     g = Jm.T @ ca.vertcat(gW, ca.cross(rho, gW))
-    first = ca.Function("env_slot_first", [*args, J, index, cols], [g, index + slots * cols])
+    first = ca.Function("env_slot_first", [*args, J], [g])
     H = _curvature_function(width)(mu, SOFT_MIN_BETA * lam * W * W, e.grad, e.curvature, rho, Jm)
     weights = ca.vertcat(mu * e.grad, ca.vec(mu * e.grad @ s["local"].T))
     at_h = ca.vertcat(*[cols + nz * cols[j] for j in range(width)])
@@ -92,9 +92,9 @@ def _kernels(width: int, nz: int = 0, slots: int = 0, n_links: int = 0) -> dict[
     return {"value": value, "first": first, "second": second}
 
 
-def kernels(n_links: int, nz: int, slots: int, width: int) -> list[ca.Function]:
-    """The SX kernels that the env rows of these shapes run."""
-    own = _kernels(width, nz, slots, n_links)
+def kernels(n_links: int, nz: int, width: int) -> list[ca.Function]:
+    """The SX kernels that the env rows of these shapes run (every capacity: the same)."""
+    own = _kernels(width, nz, n_links)
     return [_kernels(width)["value"], own["first"], own["second"]]
 
 
@@ -155,14 +155,14 @@ def rows_derivatives(
     """The rows' derivatives, functions of :func:`rows_value`'s arguments and the compressed
     Jacobians (6·D·N,): ``first`` -> Jacobian (E, nz); ``second`` (λ (E,) last) -> (∇²λᵀrows
     without the kinematics' second derivatives (nz, nz), F (3N,), G (9N,))."""
-    work = {k: switched(f, compiled) for k, f in _kernels(width, nz, slots, n_links).items()}
+    work = {k: switched(f, compiled) for k, f in _kernels(width, nz, n_links).items()}
     x = _Args(n_links, slots, width)
     lam = ca.MX.sym("lam", slots)
     names, *own = x.own()
     J = x.gathered(x.J_all, "jacobian")
     cols = x.index[x.at["chain"], :]
-    index = ca.DM(range(slots)).T
-    g, at = map_columns(work["first"], slots)(names, *own, J, index, cols)  # (D, E) each
+    g = map_columns(work["first"], slots)(names, *own, J)  # (D, E)
+    at = ca.repmat(ca.DM(range(slots)).T, width, 1) + slots * cols  # (D, E) in the (E, nz)
     jac = ca.reshape(scatter_sum(slots * nz, g, at), slots, nz)
     link = ca.fmax(x.C[0, :], 0)
     lam_s = lam.T * names

@@ -31,6 +31,7 @@ import shutil
 import sys
 import tempfile
 import threading
+import time
 from pathlib import Path
 
 import casadi as ca
@@ -115,15 +116,15 @@ def digest_of(kernel: ca.Function) -> str:
 
 def wait(timeout: float | None = None) -> bool:
     """Wait until the builder processes are done; False when ``timeout`` [s] ran out first."""
-    with _LOCK:
-        procs = set(_BUILDERS.values())
-    for proc in procs:
-        try:
-            proc.wait(timeout)  # type: ignore[attr-defined]
-        except Exception:  # noqa: BLE001 - subprocess.TimeoutExpired
+    deadline = None if timeout is None else time.monotonic() + timeout
+    while True:
+        with _LOCK:
+            running = [p for p in set(_BUILDERS.values()) if not _lifeline.finished(p)]  # type: ignore[arg-type]
+        if not running:
+            return True
+        if deadline is not None and time.monotonic() > deadline:
             return False
-        _lifeline.finished(proc)  # type: ignore[arg-type]
-    return True
+        time.sleep(0.05)
 
 
 def _from_disk(name: str, digest: str) -> ca.Function | None:
