@@ -34,7 +34,7 @@ def kernel_cache(tmp_path, monkeypatch):
 
 def _small_kernels() -> list[ca.Function]:
     """Self and env kernels of small shapes (3 links, chains of 3 joints)."""
-    return self_blocks.kernels(3, 5, 2, 3) + env_slots.kernels(3, 11, 9)
+    return self_blocks.kernels(3, 5, 2, 3) + env_slots.kernels(3, 5, 3)
 
 
 def _random_inputs(fn: ca.Function, rng: np.random.Generator) -> list[ca.DM]:

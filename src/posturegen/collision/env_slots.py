@@ -58,6 +58,9 @@ def _slot(p: Any, R: Any, column: Any, margin: Any) -> dict[str, Any]:
     }
 
 
+BASE_COLUMNS = 6  # z = (p_base (3,), w (3,), qj): the base's columns come before the joints'
+
+
 @memoize("env slot kernels", 8)
 def _kernels(width: int, nz: int = 0, n_links: int = 0) -> dict[str, ca.Function]:
     """A slot's SX work at its link's pose p (3,), R (9,) (column-major), its parameters
@@ -92,9 +95,11 @@ def _kernels(width: int, nz: int = 0, n_links: int = 0) -> dict[str, ca.Function
     return {"value": value, "first": first, "second": second}
 
 
-def kernels(n_links: int, nz: int, width: int) -> list[ca.Function]:
-    """The SX kernels that the env rows of these shapes run (every capacity: the same)."""
-    own = _kernels(width, nz, n_links)
+def kernels(n_links: int, n_joints: int, table_width: int) -> list[ca.Function]:
+    """The SX kernels that the env rows of a table of ``n_links`` links and chains of
+    ``table_width`` joints run, on a robot of ``n_joints`` joints (every capacity: the same)."""
+    width = BASE_COLUMNS + table_width
+    own = _kernels(width, BASE_COLUMNS + n_joints, n_links)
     return [_kernels(width)["value"], own["first"], own["second"]]
 
 
@@ -193,14 +198,16 @@ def env_rows(
     their derivatives; ``compiled``: their kernels in machine code
     (:mod:`posturegen.collision.native`)."""
     links = [int(j) for j in table.links]
-    n, width = slots.shape[1], 6 + table.width
+    n, width = slots.shape[1], BASE_COLUMNS + table.width
     poses = link_tables(state, links)
     values = rows_value(len(links), n, width, compiled)(slots, index, margin, poses)
 
     def build() -> BlockDerivatives:
         z = ca.vertcat(ctx.base_position, ctx.base_rotation, ctx.joints)
         J = ctx.kin.twist_jacobians(state, links, ctx.base_rotation)
-        columns = [[*range(6), *(6 + c for c in chain)] for chain in table.chains]
+        columns = [
+            [*range(BASE_COLUMNS), *(BASE_COLUMNS + c for c in chain)] for chain in table.chains
+        ]
         fns = rows_derivatives(len(links), z.shape[0], n, width, compiled)
         J_all = compressed([J[L] for L in links], columns, width)
         jac = fns["first"](slots, index, margin, poses, J_all)

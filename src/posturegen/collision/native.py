@@ -28,6 +28,7 @@ import hashlib
 import os
 import platform
 import shutil
+import subprocess
 import sys
 import tempfile
 import threading
@@ -46,9 +47,9 @@ SAVED = "kernel.casadi"  # in each kernel's folder, beside its library
 _NATIVE: BoundedCache[ca.Function] = BoundedCache("native kernels", 64)
 _DIGESTS: BoundedCache[str] = BoundedCache("kernel digests", 64)
 _LOCK = threading.Lock()
-_BUILDERS: dict[str, object] = {}  # digest -> the builder process making it
+_BUILDERS: dict[str, subprocess.Popen] = {}  # digest -> the builder process making it
 _FAILED: set[str] = set()
-_FINISHED = [0]  # builder processes done in this process
+_finished = 0  # builder processes done in this process
 
 
 def kernel_dir() -> Path:
@@ -79,13 +80,14 @@ def epoch() -> int:
     kernels were being built is declared again once this has changed."""
     with _LOCK:
         _reap()
-        return _FINISHED[0]
+        return _finished
 
 
 def _reap() -> set[str]:
     """The digests whose builder has finished, now forgotten (under _LOCK)."""
-    done = {d for d, proc in _BUILDERS.items() if _lifeline.finished(proc)}  # type: ignore[arg-type]
-    _FINISHED[0] += len({id(_BUILDERS[d]) for d in done})
+    global _finished
+    done = {d for d, proc in _BUILDERS.items() if _lifeline.finished(proc)}
+    _finished += len({id(_BUILDERS[d]) for d in done})
     for digest in done:
         del _BUILDERS[digest]
     return done
@@ -119,7 +121,7 @@ def wait(timeout: float | None = None) -> bool:
     deadline = None if timeout is None else time.monotonic() + timeout
     while True:
         with _LOCK:
-            running = [p for p in set(_BUILDERS.values()) if not _lifeline.finished(p)]  # type: ignore[arg-type]
+            running = [p for p in set(_BUILDERS.values()) if not _lifeline.finished(p)]
         if not running:
             return True
         if deadline is not None and time.monotonic() > deadline:
@@ -152,8 +154,9 @@ def _build_in_background(missing: list[tuple[str, ca.Function]]) -> None:
         root = kernel_dir()
         root.mkdir(parents=True, exist_ok=True)
         jobs = Path(tempfile.mkdtemp(prefix=".jobs-", dir=root))
-        for digest, kernel in sorted(todo, key=lambda t: -t[1].n_nodes()):  # largest first
-            kernel.save(str(jobs / f"{len(os.listdir(jobs)):02d}-{digest}.casadi"))
+        largest_first = sorted(todo, key=lambda t: -t[1].n_nodes())
+        for k, (digest, kernel) in enumerate(largest_first):
+            kernel.save(str(jobs / f"{k:02d}-{digest}.casadi"))
         cmd = ["nice", "-n", "5"] if shutil.which("nice") else []
         cmd += [sys.executable, "-m", __name__, str(jobs), cc]
         proc = _lifeline.spawn(cmd, jobs / "builder.log")
@@ -219,7 +222,7 @@ def _stop() -> None:
     with _LOCK:
         procs = set(_BUILDERS.values())
     for proc in procs:
-        _lifeline.kill(proc)  # type: ignore[arg-type]
+        _lifeline.kill(proc)
 
 
 def _main(jobs: Path, cc: str) -> None:

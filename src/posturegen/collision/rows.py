@@ -143,7 +143,7 @@ class CollisionTerm(Term):
         own = (
             self_kernels(n_links, nz, len(self.table.rows), D) if self.capacity.self_blocks else []
         )
-        env = env_kernels(n_links, nz + 6, 6 + D) if self.capacity.env_slots else []
+        env = env_kernels(n_links, nz, D) if self.capacity.env_slots else []
         ready(own + env)
         out = have(own), have(env)
         ctx.kernels_pending = ctx.kernels_pending or not all(out)
