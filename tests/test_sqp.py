@@ -59,6 +59,35 @@ def test_qp_backends_agree_and_meet_kkt(seed):
     np.testing.assert_allclose(solutions["daqp"].d, solutions["proxsuite"].d, atol=1e-6)
 
 
+def test_daqp_reuses_its_workspace_only_for_the_same_matrices():
+    """QPs at one iterate (the same B, c and A objects, other bounds, a working set or none)
+    solved on the workspace give what a fresh workspace gives; a QP with equal values in new
+    arrays is set up again; an infeasible one in between does not spoil the next."""
+    rng = np.random.default_rng(7)
+    qp = _random_qp(rng)
+    daqp = registry.backend("daqp")
+    first = daqp.solve(qp)
+    assert first.solved
+    variants = []
+    for scale in (0.5, 0.1, 2.0):
+        lbA, ubA = qp.lbA * scale, qp.ubA * scale
+        variants.append(dataclasses.replace(qp, lbA=lbA, ubA=ubA, dual_start=first.duals))
+        variants.append(dataclasses.replace(qp, lb=qp.lb * scale, ub=qp.ub * scale))
+    bad = dataclasses.replace(qp, lbA=qp.lbA.copy())
+    bad.lbA[4] = 1e3
+    for v in (*variants[:2], bad, *variants[2:]):
+        reused = daqp.solve(v)
+        fresh = registry.backend("daqp").__class__().solve(v)
+        assert reused.status == fresh.status
+        np.testing.assert_allclose(reused.d, fresh.d, atol=1e-9)
+        np.testing.assert_allclose(reused.duals, fresh.duals, atol=1e-9)
+    copied = dataclasses.replace(variants[0], B=qp.B.copy() * 2.0, c=qp.c.copy(), A=qp.A.copy())
+    again = daqp.solve(copied)
+    fresh = registry.backend("daqp").__class__().solve(copied)
+    np.testing.assert_allclose(again.d, fresh.d, atol=1e-9)
+    assert np.abs(again.d - daqp.solve(variants[0]).d).max() > 1e-6  # B doubled: another step
+
+
 def test_infeasible_qp_is_reported_not_solved():
     qp = _random_qp(np.random.default_rng(3))
     qp.lbA[4], qp.ubA[4] = 1e3, np.inf  # a row no point of the box reaches

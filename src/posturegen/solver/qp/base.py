@@ -20,7 +20,9 @@ import numpy as np
 @dataclass
 class QP:
     """One QP's data (see the module docstring); ``dual_start`` (n + m,): the multipliers of
-    a QP of the same shape, whose signs give the first working set (None: cold)."""
+    a QP of the same shape, whose signs give the first working set (None: cold). B, c and A
+    are not written to once a QP holds them: a backend may keep its factorization for the
+    next QP that holds the same arrays."""
 
     B: np.ndarray  # (n, n)
     c: np.ndarray  # (n,)

