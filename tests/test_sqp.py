@@ -5,6 +5,7 @@ fallback to IPOPT."""
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,7 +18,7 @@ from posturegen.solver import runs as runs_module
 from posturegen.solver.inspection import initial_collision_term
 from posturegen.solver.problem import Program, SolverOptions
 from posturegen.solver.qp import registry
-from posturegen.solver.qp.base import QP
+from posturegen.solver.qp.base import QP, QPSolution
 from posturegen.solver.runs import variable_scales
 from posturegen.solver.sqp.core import Bounds, SQPOptions, SQPRun, sqp
 from posturegen.solver.sqp.hessian import DELTA, convexified
@@ -88,6 +89,47 @@ def test_daqp_reuses_its_workspace_only_for_the_same_matrices():
     assert np.abs(again.d - daqp.solve(variants[0]).d).max() > 1e-6  # B doubled: another step
 
 
+def test_an_unloads_qp_is_infeasible_at_once_not_failed(monkeypatch):
+    """A QP of the SQP on Talos' unload off the ground (stairs plan; dependent equality rows,
+    38 free collision rows): daqp says infeasible without the fallback. With a workspace's
+    default settings daqp answered "overdetermined initial working set" and proxsuite then
+    ran 28 s."""
+    data = np.load(Path(__file__).parent / "data" / "unload_qp.npz")
+    qp = QP(
+        data["B"],
+        data["c"],
+        data["A"],
+        data["lb"],
+        data["ub"],
+        data["lbA"],
+        data["ubA"],
+        data["lbA"] == data["ubA"],
+    )
+    asked = []
+    proxsuite = registry.backend("proxsuite")
+    monkeypatch.setattr(proxsuite, "solve", lambda q: asked.append(q) or None)
+    assert registry.solve(qp).status == "infeasible"
+    assert not asked
+
+
+def test_a_solution_that_is_not_finite_is_a_failure(monkeypatch):
+    """A backend's "solved" with NaN is failed: the next backend answers."""
+
+    class Broken:
+        name = "broken"
+
+        def available(self) -> bool:
+            return True
+
+        def solve(self, qp: QP) -> QPSolution:
+            return QPSolution("solved", np.full(qp.c.size, np.nan), qp.c * 0, qp.lbA * 0, 1)
+
+    monkeypatch.setitem(registry._BACKENDS, "broken", Broken())
+    qp = _random_qp(np.random.default_rng(5))
+    sol = registry.solve(qp, "broken")
+    assert sol.solved and np.all(np.isfinite(sol.d))
+
+
 def test_infeasible_qp_is_reported_not_solved():
     qp = _random_qp(np.random.default_rng(3))
     qp.lbA[4], qp.ubA[4] = 1e3, np.inf  # a row no point of the box reaches
@@ -95,21 +137,22 @@ def test_infeasible_qp_is_reported_not_solved():
 
 
 def test_convexified_lifts_semidefinite_and_clips_negative_curvature():
+    """In the scaled variables: δ added where S H S is positive semi-definite, else the
+    eigenvalues below δ raised to δ, the others and every eigenvector kept."""
     rng = np.random.default_rng(4)
     scale = np.concatenate([np.ones(6), np.full(4, 900.0)])
     M = rng.normal(size=(6, 6))
     H = np.zeros((10, 10))
     H[:6, :6] = M @ M.T + np.eye(6)  # positive on the first block, zero on the "forces"
-    B, modified = convexified(H, scale)
+    Bs, modified = convexified(H, scale)
     assert not modified
-    np.testing.assert_allclose(B, H + np.diag(DELTA / scale**2), rtol=1e-12, atol=1e-15)
+    S = np.outer(scale, scale)
+    np.testing.assert_allclose(Bs, H * S + DELTA * np.eye(10), rtol=1e-12, atol=1e-15)
     H[0, 0] = -50.0  # negative curvature
-    B, modified = convexified(H, scale)
+    Bs, modified = convexified(H, scale)
     assert modified
-    Bs = B * np.outer(scale, scale)
-    w, V = np.linalg.eigh(H * np.outer(scale, scale))
+    w, V = np.linalg.eigh(H * S)
     assert np.linalg.eigvalsh(Bs).min() >= DELTA * (1 - 1e-9)
-    # the eigenvalues above δ and every eigenvector kept
     np.testing.assert_allclose(Bs @ V, V * np.maximum(w, DELTA), atol=1e-8)
 
 

@@ -8,6 +8,7 @@ one iterate) only updates its bounds, which skips B's factorization and the prod
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 from typing import Any
 
@@ -19,9 +20,15 @@ from .base import QP, QPSolution, importable
 # drives below 1e-9 [m, N]; daqp's default primal tolerance (1e-6) would stop it there
 PRIMAL_TOL = 1e-10
 ITER_LIMIT = 2000
+# without proximal regularization (the SQP's B is positive definite) and with the equality
+# rows always reduced, as daqp.solve sets them; a workspace's defaults (automatic: on a cold
+# solve only) answered "overdetermined initial working set" (-6) on a Talos unload's QP
+# that daqp.solve found infeasible at once, and proxsuite, its fallback, then spent 28 s
+SETTINGS = {"primal_tol": PRIMAL_TOL, "iter_limit": ITER_LIMIT, "eps_prox": 0.0, "eq_reduction": 1}
 # daqp's constraint flags: an equality; a constraint in the first working set (at its upper
 # bound; with LOWER, at its lower one)
 _EQUALITY, _ACTIVE, _LOWER = 5, 1, 2
+_INFEASIBLE = -1  # daqp's exit flag of a QP without a feasible point
 
 
 class _Workspace(threading.local):
@@ -44,6 +51,13 @@ class DaqpBackend:
         return importable("daqp")
 
     def solve(self, qp: QP) -> QPSolution:
+        sol = self._solved(qp)
+        if sol.status == "failed" and qp.dual_start is not None:
+            # the first working set was a hint: cold when it is overdetermined (daqp's -6)
+            sol = self._solved(dataclasses.replace(qp, dual_start=None))
+        return sol
+
+    def _solved(self, qp: QP) -> QPSolution:
         import daqp
 
         n = qp.c.size
@@ -56,21 +70,16 @@ class DaqpBackend:
             flag = ws.model.update(bupper=upper, blower=lower, sense=sense)
         else:
             ws.model, ws.matrices = daqp.Model(), None
-            ws.model.settings = {"primal_tol": PRIMAL_TOL, "iter_limit": ITER_LIMIT}
+            ws.model.settings = SETTINGS
             flag, _ = ws.model.setup(qp.B, qp.c, qp.A, upper, lower, sense)
         if flag < 0:
             ws.matrices = None
-            return QPSolution(
-                "infeasible" if flag == -1 else "failed",
-                np.zeros(n),
-                np.zeros(n),
-                np.zeros(qp.lbA.size),
-                0,
-            )
+            status = "infeasible" if flag == _INFEASIBLE else "failed"
+            return QPSolution(status, np.zeros(n), np.zeros(n), np.zeros(qp.lbA.size), 0)
         ws.matrices = (qp.B, qp.c, qp.A)
         d, _fval, flag, info = ws.model.solve()
         lam = np.asarray(info["lam"], dtype=float)
-        status = "solved" if flag in (1, 2) else "infeasible" if flag == -1 else "failed"
+        status = "solved" if flag in (1, 2) else "infeasible" if flag == _INFEASIBLE else "failed"
         if status != "solved":
             lam = np.zeros(upper.size)
         return QPSolution(status, np.asarray(d, dtype=float), lam[:n], lam[n:], info["iterations"])
@@ -84,4 +93,5 @@ def _sense(qp: QP, n: int) -> np.ndarray:
         sense[qp.dual_start > 0] = _ACTIVE
         sense[qp.dual_start < 0] = _ACTIVE | _LOWER
     sense[n:][qp.equal] = _EQUALITY
+    sense[:n][qp.lb == qp.ub] = _EQUALITY  # a fixed variable (an unloaded contact's forces)
     return sense

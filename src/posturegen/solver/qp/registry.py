@@ -4,6 +4,10 @@ A backend is one file (``*_backend.py``) with a class that has ``name``, ``avail
 
 from __future__ import annotations
 
+import dataclasses
+
+import numpy as np
+
 from ...errors import InputError, SolveError
 from .base import QP, QPBackend, QPSolution
 from .daqp_backend import DaqpBackend
@@ -50,12 +54,22 @@ def solve(qp: QP, name: str | None = None) -> QPSolution:
     """Solve ``qp`` with backend ``name`` (default: the first available); when it fails (not
     when it proves the QP infeasible) the next available backend tries."""
     first = backend(name)
-    solution = first.solve(qp)
+    solution = _checked(first.solve(qp))
     if solution.status != "failed":
         return solution
     for other in available():
         if other != first.name:
-            solution = _BACKENDS[other].solve(qp)
+            solution = _checked(_BACKENDS[other].solve(qp))
             if solution.status != "failed":
                 return solution
+    return solution
+
+
+def _checked(solution: QPSolution) -> QPSolution:
+    """The solution, "failed" when a solved one holds a value that is not finite."""
+    finite = all(
+        np.all(np.isfinite(v)) for v in (solution.d, solution.lam_bounds, solution.lam_rows)
+    )
+    if solution.solved and not finite:
+        return dataclasses.replace(solution, status="failed")
     return solution

@@ -7,17 +7,19 @@ Each iteration: B = ∇²L made positive definite (:mod:`.hessian`); the QP
 
     min ½ dᵀBd + ∇fᵀd  s.t.  lbg <= g + J d <= ubg,  lbx <= x + d <= ubx,  |d_i| <= Δ s_i
 
-(its elastic form when it has no solution); the step is taken when the merit's actual
-reduction is at least ETA of the model's; else the second-order correction (the same QP with
-its rows shifted by g(x + d) - g - J d) is tried, then the region shrinks. When the QP has
-no solution in the region, its violated rows ask for a fraction θ of their correction
-(Vardi's relaxation, the largest θ of THETAS that has one); the elastic QP is the last
-resort. ν only grows, as the steps need it (:func:`_steered`), up to PENALTY_MAX.
+solved in the scaled variables d̃ = d / s (its elastic form when it has no solution); the
+step is taken when the merit's actual reduction is at least ETA of the model's; else the
+second-order correction (the same QP with its rows shifted by g(x + d) - g - J d) is tried,
+then the region shrinks. When the QP has no solution in the region, its violated rows ask for
+a fraction θ of their correction (Vardi's relaxation, the largest θ of THETAS that has one);
+the elastic QP is the last resort. ν only grows, as the steps need it (:func:`_steered`), up
+to PENALTY_MAX.
 Converged when the constraints hold to ``tol_primal`` and ∇f + Jᵀλ_g + λ_x to ``tol_dual``
 (relative to max(1, ‖∇f‖∞))."""
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -127,20 +129,20 @@ def sqp(
     run, it = _first(oracle, x0, bounds, lam_g0, lam_x0, duals0)
     lam_g, lam_x = run.lam_g, run.lam_x
     radius, penalty = options.radius, options.penalty
-    B: np.ndarray | None = None
+    Bs: np.ndarray | None = None
     stall = _Stall(float(np.sum(bounds.violation(it.g))))
     for _ in range(options.max_iter):
         stop = _stop(it, lam_g, lam_x, bounds, options, stall, t0)
         if stop is not None:
             run.status = stop
             break
-        if B is None:
+        if Bs is None:
             H = oracle.hessian(it.x, 1.0, lam_g)
-            B, modified = convexified(H, bounds.scale)
+            Bs, modified = convexified(H, bounds.scale)
             run.modified_hessians += modified
         run.iterations += 1
-        qp = _qp(it, B, bounds, radius, run.duals)
-        sol, penalty = _step(qp, it, B, bounds, penalty, options, run)
+        qp = _qp(it, Bs, bounds, radius, run.duals)
+        sol, penalty = _step(qp, it, Bs, bounds, penalty, options, run)
         if not sol.solved:
             run.status = "Error_In_Step_Computation"
             break
@@ -153,7 +155,7 @@ def sqp(
                 run.status = _stalled(it, bounds, options)
             break
         run.history.append((it.f, _max_abs(bounds.violation(it.g)), radius))
-        step = _try_step(oracle, it, B, sol, qp, bounds, penalty, options)
+        step = _try_step(oracle, it, Bs, sol, qp, bounds, penalty, options)
         if step is None:  # rejected: a smaller region
             radius = 0.25 * min(radius, d_size)
             if radius < options.radius_min:
@@ -163,7 +165,7 @@ def sqp(
         it, ratio = step
         lam_g = sol.lam_rows
         lam_x = _own_bound_multipliers(sol, qp, it, bounds)
-        B = None
+        Bs = None
         if ratio > 0.75 and d_size >= 0.99 * radius:
             radius = min(2.0 * radius, RADIUS_MAX)
     else:
@@ -212,7 +214,7 @@ def _first(
 def _step(
     qp: QP,
     it: _Iterate,
-    B: np.ndarray,
+    Bs: np.ndarray,
     bounds: Bounds,
     penalty: float,
     options: SQPOptions,
@@ -222,10 +224,12 @@ def _step(
     resort) and the penalty it needs."""
     sol = _relaxed(qp, options, run)
     if sol.solved:
+        sol = _unscaled(sol, bounds.scale)
         run.duals = sol.duals
-        penalty = _steered(it, B, sol.d, bounds, penalty)
+        penalty = _steered(it, Bs, sol.d, bounds, penalty)
     else:
         sol, penalty = _elastic(qp, it, penalty, options, run)
+        sol = _unscaled(sol, bounds.scale)
     run.qp_iterations += sol.iterations
     return sol, penalty
 
@@ -251,20 +255,35 @@ def _converged(
     return _max_abs(lam_g * gap) <= options.tol_dual * scale
 
 
-def _qp(it: _Iterate, B: np.ndarray, bounds: Bounds, radius: float, duals: np.ndarray | None) -> QP:
-    """The QP at ``it`` in the region of ``radius``."""
-    reach = radius * bounds.scale
+def _qp(
+    it: _Iterate, Bs: np.ndarray, bounds: Bounds, radius: float, duals: np.ndarray | None
+) -> QP:
+    """The QP at ``it`` in the region of ``radius``, in the scaled variables d̃ = d / s:
+    B̃ = S B S, c̃ = S ∇f, Ã = J S, the bounds divided by s (the rows' are unchanged)."""
+    s = bounds.scale
     return QP(
-        B=B,
-        c=it.grad,
-        A=it.J,
-        lb=np.maximum(bounds.lbx - it.x, -reach),
-        ub=np.minimum(bounds.ubx - it.x, reach),
+        B=Bs,
+        c=it.grad * s,
+        A=it.J * s,
+        lb=np.maximum((bounds.lbx - it.x) / s, -radius),
+        ub=np.minimum((bounds.ubx - it.x) / s, radius),
         lbA=bounds.lbg - it.g,
         ubA=bounds.ubg - it.g,
         equal=bounds.lbg == bounds.ubg,
         dual_start=duals,
     )
+
+
+def _unscaled(sol: QPSolution, scale: np.ndarray) -> QPSolution:
+    """A scaled QP's solution in the variables' units: d = S d̃, λ_d = S⁻¹ λ̃_d (the rows'
+    multipliers are the same)."""
+    return dataclasses.replace(sol, d=sol.d * scale, lam_bounds=sol.lam_bounds / scale)
+
+
+def _curvature(Bs: np.ndarray, d: np.ndarray, scale: np.ndarray) -> float:
+    """½ dᵀBd from the scaled B̃ = S B S."""
+    ds = d / scale
+    return 0.5 * float(ds @ Bs @ ds)
 
 
 # the fractions θ of the violated rows' linearized correction tried when the QP has no
@@ -320,30 +339,30 @@ def _elastic(
     return sol, penalty
 
 
-def _steered(it: _Iterate, B: np.ndarray, d: np.ndarray, bounds: Bounds, penalty: float) -> float:
+def _steered(it: _Iterate, Bs: np.ndarray, d: np.ndarray, bounds: Bounds, penalty: float) -> float:
     """ν large enough that the step's predicted reduction is at least half its reduction of
     the linearized violation, ν ≥ (∇fᵀd + ½dᵀBd) / ((1 - 0.5) Δv) (Nocedal & Wright, 18.36):
     ν follows what the steps need, not the QP's multipliers (a degenerate QP's run to 1e4)."""
     dv = float(np.sum(bounds.violation(it.g)) - np.sum(bounds.violation(it.g + it.J @ d)))
-    q = float(it.grad @ d + 0.5 * d @ B @ d)
+    q = float(it.grad @ d) + _curvature(Bs, d, bounds.scale)
     if dv > 1e-14 and q > 0:
         penalty = max(penalty, q / (0.5 * dv))
     return min(penalty, PENALTY_MAX)
 
 
 def _model_reduction(
-    it: _Iterate, B: np.ndarray, d: np.ndarray, bounds: Bounds, penalty: float
+    it: _Iterate, Bs: np.ndarray, d: np.ndarray, bounds: Bounds, penalty: float
 ) -> float:
     """ν‖viol(g)‖₁ - (∇fᵀd + ½dᵀBd + ν‖viol(g + J d)‖₁): what the step promises."""
     v0 = float(np.sum(bounds.violation(it.g)))
     v1 = float(np.sum(bounds.violation(it.g + it.J @ d)))
-    return penalty * (v0 - v1) - float(it.grad @ d + 0.5 * d @ B @ d)
+    return penalty * (v0 - v1) - float(it.grad @ d) - _curvature(Bs, d, bounds.scale)
 
 
 def _try_step(
     oracle: Oracle,
     it: _Iterate,
-    B: np.ndarray,
+    Bs: np.ndarray,
     sol: QPSolution,
     qp: QP,
     bounds: Bounds,
@@ -352,7 +371,7 @@ def _try_step(
 ) -> tuple[_Iterate, float] | None:
     """The next iterate and its ratio actual / predicted reduction, or None when neither the
     step nor its second-order correction reduces the merit enough."""
-    pred = _model_reduction(it, B, sol.d, bounds, penalty)
+    pred = _model_reduction(it, Bs, sol.d, bounds, penalty)
     merit0 = it.f + penalty * float(np.sum(bounds.violation(it.g)))
     if pred <= 1e-16 * max(1.0, abs(merit0)):
         return None
@@ -368,6 +387,7 @@ def _try_step(
         corrected = registry.solve(soc, options.qp)
         if not corrected.solved:
             return None
+        corrected = _unscaled(corrected, bounds.scale)
         x1 = np.clip(it.x + corrected.d, bounds.lbx, bounds.ubx)
         f1, g1 = oracle.value(x1)
         ratio = (merit0 - f1 - penalty * float(np.sum(bounds.violation(g1)))) / pred

@@ -14,8 +14,14 @@ import numpy as np
 
 from ..qp import registry
 from ..qp.base import QP, QPSolution
+from .hessian import DELTA
 
 EPSILON = 1e-8  # the slacks' quadratic weight relative to ν (B must be positive definite)
+# ... and at least the smallest curvature of the variables' block (the QP is in the scaled
+# variables, whose B's eigenvalues are at least δ/2): with 1e-8 ν alone, daqp found the
+# elastic QPs of Talos' unloads not convex (its Cholesky factorization failed) and proxsuite,
+# its fallback, ran its 1000 iterations for 11 s a QP
+SLACK_CURVATURE_MIN = 0.5 * DELTA
 
 
 def solve_elastic(qp: QP, penalty: float, backend: str | None = None) -> QPSolution:
@@ -31,7 +37,7 @@ def solve_elastic(qp: QP, penalty: float, backend: str | None = None) -> QPSolut
     A[down, n + up.size + np.arange(down.size)] = -1.0
     B = np.zeros((n + k, n + k))
     B[:n, :n] = qp.B
-    B[n:, n:] = np.eye(k) * (EPSILON * penalty)
+    B[n:, n:] = np.eye(k) * max(EPSILON * penalty, SLACK_CURVATURE_MIN)
     c = np.concatenate([qp.c, np.full(k, penalty)])
     elastic = QP(
         B=B,

@@ -19,20 +19,19 @@ DELTA = 1e-4  # the smallest eigenvalue in scaled variables
 
 
 def convexified(H: np.ndarray, scale: np.ndarray, delta: float = DELTA) -> tuple[np.ndarray, bool]:
-    """(B, modified): B = H + δ S⁻² when S H S + δ/2 I is positive definite (S =
-    diag(scale): where H is positive semi-definite, the smallest eigenvalue lifted to δ), else
-    S⁻¹ V max(Λ, δ) Vᵀ S⁻¹ with S H S = V Λ Vᵀ."""
+    """(B̃, modified): the Hessian in the scaled variables d̃ = d / s made positive definite,
+    B̃ = S H S + δ I when S H S + δ/2 I is positive definite (S = diag(scale): where S H S is
+    positive semi-definite, its smallest eigenvalue lifted to δ), else V max(Λ, δ) Vᵀ with
+    S H S = V Λ Vᵀ. B̃'s eigenvalues are at least δ/2: the QP is solved in these variables (in
+    metres and newtons, the forces' δ / weight² made a Talos QP's condition number 6e12)."""
     Hs = H * np.outer(scale, scale)
     # δ on the diagonal alone where the curvature is only missing (the forces enter
     # linearly: their block is zero), not negative
     lifted = Hs + delta * np.eye(H.shape[0])
     try:
         np.linalg.cholesky(lifted - 0.5 * delta * np.eye(H.shape[0]))
-        inv = 1.0 / scale
-        return lifted * np.outer(inv, inv), False
+        return lifted, False
     except np.linalg.LinAlgError:
         pass
     w, V = np.linalg.eigh(Hs)
-    Bs = (V * np.maximum(w, delta)) @ V.T
-    inv = 1.0 / scale
-    return Bs * np.outer(inv, inv), True
+    return (V * np.maximum(w, delta)) @ V.T, True
