@@ -335,3 +335,32 @@ def test_an_elastic_step_whose_violation_cannot_fall_stops_raising_the_penalty()
     np.testing.assert_allclose(sol.d, [0.01, 0.01], atol=1e-8)  # as far as the region goes
     assert run.elastic_qps == core.ELASTIC_RAISES + 1
     assert penalty == 10.0**core.ELASTIC_RAISES
+
+
+class _NaNBeyond:
+    """min (x - 2)² s.t. -10 <= x <= 10 (one row), with f not finite beyond x = 1.5: the
+    oracle of a program whose functions fail outside a region."""
+
+    n, m = 1, 1
+
+    def value(self, x: np.ndarray) -> tuple[float, np.ndarray]:
+        f = float((x[0] - 2.0) ** 2) if x[0] <= 1.5 else float("nan")
+        return f, x.copy()
+
+    def first_order(self, x: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        f, g = self.value(x)
+        return f, np.array([2.0 * (x[0] - 2.0)]), g, np.ones((1, 1))
+
+    def hessian(self, x: np.ndarray, sigma: float, lam_g: np.ndarray) -> np.ndarray:
+        return np.array([[2.0 * sigma]])
+
+
+def test_a_trial_point_where_the_functions_are_not_finite_is_rejected():
+    """The step to x = 2 meets f = NaN: rejected (a NaN ratio once passed `ratio < ETA`), the
+    run ends at a finite point."""
+    bounds = Bounds(
+        np.array([-10.0]), np.array([10.0]), np.array([-10.0]), np.array([10.0]), np.ones(1)
+    )
+    run = sqp(_NaNBeyond(), np.zeros(1), bounds, SQPOptions(max_iter=50))  # type: ignore[arg-type]
+    assert np.isfinite(run.f) and run.x[0] <= 1.5
+    assert run.x[0] > 1.0  # it moved towards the optimum as far as the functions allow

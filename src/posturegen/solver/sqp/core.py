@@ -378,7 +378,7 @@ def _try_step(
     x1 = np.clip(it.x + sol.d, bounds.lbx, bounds.ubx)
     f1, g1 = oracle.value(x1)
     ratio = (merit0 - f1 - penalty * float(np.sum(bounds.violation(g1)))) / pred
-    if ratio < ETA:
+    if not ratio >= ETA:  # NaN (f or g not finite at the trial point): rejected
         # second-order correction: the rows shifted by their curvature along d
         shift = g1 - it.g - it.J @ sol.d
         soc = QP(
@@ -391,7 +391,7 @@ def _try_step(
         x1 = np.clip(it.x + corrected.d, bounds.lbx, bounds.ubx)
         f1, g1 = oracle.value(x1)
         ratio = (merit0 - f1 - penalty * float(np.sum(bounds.violation(g1)))) / pred
-        if ratio < ETA:
+        if not ratio >= ETA:  # NaN (f or g not finite at the trial point): rejected
             return None
     return _Iterate(x1, *oracle.first_order(x1)), ratio
 
