@@ -129,19 +129,20 @@ def sqp(
     run, it = _first(oracle, x0, bounds, lam_g0, lam_x0, duals0)
     lam_g, lam_x = run.lam_g, run.lam_x
     radius, penalty = options.radius, options.penalty
-    Bs: np.ndarray | None = None
+    # (B̃, c̃, Ã) of the iterate in the scaled variables: the same arrays for each of its QPs
+    # (the QP backend keeps its factorization for them)
+    scaled: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     stall = _Stall(float(np.sum(bounds.violation(it.g))))
     for _ in range(options.max_iter):
         stop = _stop(it, lam_g, lam_x, bounds, options, stall, t0)
         if stop is not None:
             run.status = stop
             break
-        if Bs is None:
-            H = oracle.hessian(it.x, 1.0, lam_g)
-            Bs, modified = convexified(H, bounds.scale)
-            run.modified_hessians += modified
+        if scaled is None:
+            scaled = _model(oracle, it, lam_g, bounds, run)
+        Bs = scaled[0]
         run.iterations += 1
-        qp = _qp(it, Bs, bounds, radius, run.duals)
+        qp = _qp(it, scaled, bounds, radius, run.duals)
         sol, penalty = _step(qp, it, Bs, bounds, penalty, options, run)
         if not sol.solved:
             run.status = "Error_In_Step_Computation"
@@ -165,7 +166,7 @@ def sqp(
         it, ratio = step
         lam_g = sol.lam_rows
         lam_x = _own_bound_multipliers(sol, qp, it, bounds)
-        Bs = None
+        scaled = None
         if ratio > 0.75 and d_size >= 0.99 * radius:
             radius = min(2.0 * radius, RADIUS_MAX)
     else:
@@ -174,6 +175,15 @@ def sqp(
     run.x, run.f, run.lam_g, run.lam_x = it.x, it.f, lam_g, lam_x
     run.wall_s = time.perf_counter() - t0
     return run
+
+
+def _model(
+    oracle: Oracle, it: _Iterate, lam_g: np.ndarray, bounds: Bounds, run: SQPRun
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(B̃, c̃, Ã) at ``it`` in the scaled variables: ∇²L made positive definite, ∇f and J."""
+    Bs, modified = convexified(oracle.hessian(it.x, 1.0, lam_g), bounds.scale)
+    run.modified_hessians += modified
+    return Bs, it.grad * bounds.scale, it.J * bounds.scale
 
 
 def _stop(
@@ -256,15 +266,21 @@ def _converged(
 
 
 def _qp(
-    it: _Iterate, Bs: np.ndarray, bounds: Bounds, radius: float, duals: np.ndarray | None
+    it: _Iterate,
+    scaled: tuple[np.ndarray, np.ndarray, np.ndarray],
+    bounds: Bounds,
+    radius: float,
+    duals: np.ndarray | None,
 ) -> QP:
     """The QP at ``it`` in the region of ``radius``, in the scaled variables d̃ = d / s:
-    B̃ = S B S, c̃ = S ∇f, Ã = J S, the bounds divided by s (the rows' are unchanged)."""
+    ``scaled`` = (B̃ = S B S, c̃ = S ∇f, Ã = J S), the bounds divided by s (the rows' are
+    unchanged)."""
     s = bounds.scale
+    Bs, cs, As = scaled
     return QP(
         B=Bs,
-        c=it.grad * s,
-        A=it.J * s,
+        c=cs,
+        A=As,
         lb=np.maximum((bounds.lbx - it.x) / s, -radius),
         ub=np.minimum((bounds.ubx - it.x) / s, radius),
         lbA=bounds.lbg - it.g,
