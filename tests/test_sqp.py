@@ -21,7 +21,7 @@ from posturegen.solver.qp import registry
 from posturegen.solver.qp.base import QP, QPSolution
 from posturegen.solver.runs import variable_scales
 from posturegen.solver.sqp.core import Bounds, SQPOptions, SQPRun, sqp
-from posturegen.solver.sqp.hessian import DELTA, convexified
+from posturegen.solver.sqp.hessian import CURVATURE_MAX, DELTA, convexified
 from posturegen.solver.sqp.oracle import Oracle
 
 
@@ -154,6 +154,18 @@ def test_convexified_lifts_semidefinite_and_clips_negative_curvature():
     w, V = np.linalg.eigh(H * S)
     assert np.linalg.eigvalsh(Bs).min() >= DELTA * (1 - 1e-9)
     np.testing.assert_allclose(Bs @ V, V * np.maximum(w, DELTA), atol=1e-8)
+
+
+def test_convexified_caps_runaway_curvature():
+    """A Hessian whose multipliers ran away (an eigenvalue 1e10 in scaled variables): that
+    eigenvalue is cut to CURVATURE_MAX, the others and the eigenvectors kept."""
+    rng = np.random.default_rng(6)
+    Q, _ = np.linalg.qr(rng.normal(size=(8, 8)))
+    w = np.array([1e10, 3e4, 50.0, 2.0, 1.0, 0.5, 0.1, 0.01])
+    H = (Q * w) @ Q.T
+    Bs, modified = convexified(H, np.ones(8))
+    assert modified
+    np.testing.assert_allclose(Bs @ Q, Q * np.minimum(w, CURVATURE_MAX), rtol=1e-6, atol=1e-3)
 
 
 def _with(problem, **options):
