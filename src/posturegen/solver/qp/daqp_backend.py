@@ -4,7 +4,7 @@ warm-started from the signs of the previous QP's multipliers (its working set).
 A workspace (``daqp.Model``) is kept per thread: a QP whose B, c and A are the arrays of the
 QP solved before it (the same objects: an SQP's relaxed, corrected and smaller-region QPs at
 one iterate) only updates its bounds, which skips B's factorization and the products with A
-(Talos' 62 × 95 reach: 28 µs a QP instead of 124 µs)."""
+(a QP of Talos' reach's size, 62 × 95: 28 µs instead of 124 µs)."""
 
 from __future__ import annotations
 
