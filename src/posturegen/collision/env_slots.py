@@ -26,7 +26,7 @@ from .._cache import memoize
 from ..model.kinematics import skew
 from ..terms.nlp import BlockDerivatives, BuildContext
 from .self_blocks import link_tables
-from .slots import RowTable, env_index_rows
+from .slots import BASE_COLUMNS, RowTable, env_index_rows
 from .soft_min import (
     ENV_SATURATION,
     SOFT_MIN_BETA,
@@ -56,9 +56,6 @@ def _slot(p: Any, R: Any, column: Any, margin: Any) -> dict[str, Any]:
         "local": s_local,
         "element": element,
     }
-
-
-BASE_COLUMNS = 6  # z = (p_base (3,), w (3,), qj): the base's columns come before the joints'
 
 
 @memoize("env slot kernels", 8)

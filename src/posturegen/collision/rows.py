@@ -52,6 +52,7 @@ from .proxies import ProxyModel
 from .self_blocks import INDEX_NAMES, self_rows
 from .self_blocks import kernels as self_kernels
 from .slots import (
+    BASE_COLUMNS,
     SELF_SLOT_BLOCK,
     Capacity,
     RowTable,
@@ -127,7 +128,7 @@ class CollisionTerm(Term):
             nlp.constrain("collision.self", value, 0.0, np.inf, deriv)
         if E:
             slots = ca.reshape(nlp.parameter("collision.env_slots", 20 * E), 20, E)
-            rows = env_index_rows(6 + D)["chain"].stop
+            rows = env_index_rows(BASE_COLUMNS + D)["chain"].stop
             index = ca.reshape(nlp.parameter("collision.env_index", rows * E), rows, E)
             value, deriv = env_rows(ctx, ctx.state, self.table, slots, index, margin, native_env)
             nlp.constrain("collision.env", value, 0.0, np.inf, deriv)

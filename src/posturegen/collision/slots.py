@@ -301,6 +301,10 @@ def env_parameters(
     return out
 
 
+# z = (p_base (3,), w (3,), qj): the env rows' variables, the base's columns before the joints'
+BASE_COLUMNS = 6
+
+
 def env_index_rows(width: int) -> dict[str, slice]:
     """Where each index set of an env slot stands in :func:`env_indices`' rows (``width``
     its link's columns in z = (p_base, w, qj): the base's six and the chain's)."""
@@ -311,7 +315,7 @@ def env_indices(table: RowTable, links: np.ndarray) -> np.ndarray:
     """(K, E) each env slot's indices (:func:`env_index_rows`): where its link's pose and
     compressed twist Jacobian (on z = (p_base, w, qj)) are, and its link's columns in z
     (padded with PADDING). A free slot reads entry 0 and has no columns."""
-    chains = table.padded_chains(6)  # (N, D)
+    chains = table.padded_chains(BASE_COLUMNS)  # (N, D)
     D = chains.shape[1]
     at = env_index_rows(D)
     out = np.zeros((at["chain"].stop, len(links)))
