@@ -23,7 +23,6 @@ make. Without a C compiler, or when a build fails, the kernels stay on the virtu
 
 from __future__ import annotations
 
-import atexit
 import hashlib
 import os
 import platform
@@ -159,6 +158,7 @@ def _build_in_background(missing: list[tuple[str, ca.Function]]) -> None:
             kernel.save(str(jobs / f"{k:02d}-{digest}.casadi"))
         cmd = ["nice", "-n", "5"] if shutil.which("nice") else []
         cmd += [sys.executable, "-m", __name__, str(jobs), cc]
+        # stopped at exit with every child of _lifeline (a half-made folder has no SAVED)
         proc = _lifeline.spawn(cmd, jobs / "builder.log")
         for digest, _ in todo:
             _BUILDERS[digest] = proc
@@ -214,15 +214,6 @@ def _prune() -> None:
                 shutil.rmtree(folder, ignore_errors=True)
     except OSError:
         pass
-
-
-@atexit.register
-def _stop() -> None:
-    """At exit: stop the builders (their half-made folders are left without SAVED)."""
-    with _LOCK:
-        procs = set(_BUILDERS.values())
-    for proc in procs:
-        _lifeline.kill(proc)
 
 
 def _main(jobs: Path, cc: str) -> None:
