@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import os
 
 import casadi as ca
 import numpy as np
@@ -107,3 +108,20 @@ def test_a_program_declared_while_its_kernels_were_built_is_declared_again_with_
     assert np.array_equal(second.x, first.x)
     off = dataclasses.replace(problem.solver_options, codegen="off")
     assert not native_kernels(dataclasses.replace(problem, solver_options=off))
+
+
+def test_prune_keeps_the_most_recently_used_kernels(tmp_path, monkeypatch):
+    """Beyond MAX_CACHE_BYTES the least recently used kernel folders go; a folder without its
+    saved function (a build in progress) is not counted nor removed."""
+    monkeypatch.setenv("POSTUREGEN_CACHE", str(tmp_path))
+    root = native.kernel_dir()
+    root.mkdir(parents=True)
+    for age, name in enumerate(["new", "mid", "old"]):  # 3 MB each, older and older
+        folder = root / name
+        folder.mkdir()
+        (folder / native.SAVED).write_bytes(b"\0" * (3 << 20))
+        os.utime(folder, (1e9 - age * 100, 1e9 - age * 100))
+    (root / "building").mkdir()
+    monkeypatch.setattr(native, "MAX_CACHE_BYTES", 7 << 20)
+    native._prune()
+    assert sorted(p.name for p in root.iterdir()) == ["building", "mid", "new"]

@@ -23,6 +23,7 @@ make. Without a C compiler, or when a build fails, the kernels stay on the virtu
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import platform
@@ -38,7 +39,7 @@ import casadi as ca
 
 from .. import _lifeline
 from .._cache import BoundedCache, Ref
-from .._compiler import cache_root, compiler
+from .._compiler import Entry, cache_root, compiler, evict_least_recent
 
 FLAGS = ("-O1", "-ffp-contract=off")
 MAX_CACHE_BYTES = 256 << 20  # a robot's set is 2-5 MB
@@ -201,19 +202,21 @@ def build(kernel: ca.Function, digest: str, cc: str) -> Path:
 
 
 def _prune() -> None:
-    """Delete the least recently used kernels beyond MAX_CACHE_BYTES in all."""
-    try:
-        folders = sorted(
-            (p for p in kernel_dir().iterdir() if (p / SAVED).is_file()),
-            key=lambda p: -p.stat().st_mtime,
-        )
-        total = 0
-        for folder in folders:
-            total += sum(f.stat().st_size for f in folder.iterdir())
-            if total > MAX_CACHE_BYTES:
-                shutil.rmtree(folder, ignore_errors=True)
-    except OSError:
-        pass
+    """Delete the least recently used kernels (their folders, by modification time, which
+    :func:`_from_disk` refreshes) beyond MAX_CACHE_BYTES in all."""
+
+    def folders() -> list[Entry]:
+        return [
+            (
+                folder.stat().st_mtime,
+                sum(f.stat().st_size for f in folder.iterdir()),
+                functools.partial(shutil.rmtree, folder, ignore_errors=True),
+            )
+            for folder in kernel_dir().iterdir()
+            if (folder / SAVED).is_file()
+        ]
+
+    evict_least_recent(folders, MAX_CACHE_BYTES)
 
 
 def _main(jobs: Path, cc: str) -> None:

@@ -55,6 +55,7 @@ and counts as failed (the virtual machine solves on).
 from __future__ import annotations
 
 import atexit
+import functools
 import hashlib
 import os
 import platform
@@ -72,7 +73,7 @@ import casadi as ca
 import numpy as np
 
 from .. import _lifeline
-from .._compiler import cache_root, compiler
+from .._compiler import Entry, cache_root, compiler, evict_least_recent
 from ..errors import InputError
 
 CODEGEN_VERSION = 2  # 2: the outputs function in the library, the layout beside it
@@ -382,17 +383,22 @@ def _check(proc: subprocess.Popen, what: str, log: Path) -> None:
 
 def _prune() -> None:
     """Delete the least recently used libraries (by modification time, which :func:`load`
-    refreshes) beyond MAX_CACHE_BYTES in all."""
-    try:
-        libs = [(p.stat(), p) for p in cache_dir().glob("*.so")]
-        total = 0
-        for st, path in sorted(libs, key=lambda s: -s[0].st_mtime):
-            total += st.st_size
-            if total > MAX_CACHE_BYTES:
-                path.unlink(missing_ok=True)
-                layout_path(path.stem).unlink(missing_ok=True)
-    except OSError:
-        pass
+    refreshes) and their layouts beyond MAX_CACHE_BYTES in all."""
+
+    def libraries() -> list[Entry]:
+        out: list[Entry] = []
+        for path in cache_dir().glob("*.so"):
+            st = path.stat()
+            out.append((st.st_mtime, st.st_size, functools.partial(_remove_library, path)))
+        return out
+
+    evict_least_recent(libraries, MAX_CACHE_BYTES)
+
+
+def _remove_library(path: Path) -> None:
+    """Delete a cached library and its layout."""
+    path.unlink(missing_ok=True)
+    layout_path(path.stem).unlink(missing_ok=True)
 
 
 @atexit.register
