@@ -53,7 +53,8 @@ class DaqpBackend:
     def solve(self, qp: QP) -> QPSolution:
         sol = self._solved(qp)
         if sol.status == "failed" and qp.dual_start is not None:
-            # the first working set was a hint: cold when it is overdetermined (daqp's -6)
+            # the first working set was a hint: a failure from it (an overdetermined set,
+            # daqp's -6, or cycling) is tried again cold
             sol = self._solved(dataclasses.replace(qp, dual_start=None))
         return sol
 

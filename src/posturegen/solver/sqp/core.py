@@ -140,10 +140,9 @@ def sqp(
             break
         if scaled is None:
             scaled = _model(oracle, it, lam_g, bounds, run)
-        Bs = scaled[0]
         run.iterations += 1
         qp = _qp(it, scaled, bounds, radius, run.duals)
-        sol, penalty = _step(qp, it, Bs, bounds, penalty, options, run)
+        sol, penalty = _step(qp, it, bounds, penalty, options, run)
         if not sol.solved:
             run.status = "Error_In_Step_Computation"
             break
@@ -156,7 +155,7 @@ def sqp(
                 run.status = _stalled(it, bounds, options)
             break
         run.history.append((it.f, _max_abs(bounds.violation(it.g)), radius))
-        step = _try_step(oracle, it, Bs, sol, qp, bounds, penalty, options)
+        step = _try_step(oracle, it, sol, qp, bounds, penalty, options)
         if step is None:  # rejected: a smaller region
             radius = 0.25 * min(radius, d_size)
             if radius < options.radius_min:
@@ -224,7 +223,6 @@ def _first(
 def _step(
     qp: QP,
     it: _Iterate,
-    Bs: np.ndarray,
     bounds: Bounds,
     penalty: float,
     options: SQPOptions,
@@ -236,7 +234,7 @@ def _step(
     if sol.solved:
         sol = _unscaled(sol, bounds.scale)
         run.duals = sol.duals
-        penalty = _steered(it, Bs, sol.d, bounds, penalty)
+        penalty = _steered(it, qp.B, sol.d, bounds, penalty)
     else:
         sol, penalty = _elastic(qp, it, penalty, options, run)
         sol = _unscaled(sol, bounds.scale)
@@ -378,7 +376,6 @@ def _model_reduction(
 def _try_step(
     oracle: Oracle,
     it: _Iterate,
-    Bs: np.ndarray,
     sol: QPSolution,
     qp: QP,
     bounds: Bounds,
@@ -387,7 +384,7 @@ def _try_step(
 ) -> tuple[_Iterate, float] | None:
     """The next iterate and its ratio actual / predicted reduction, or None when neither the
     step nor its second-order correction reduces the merit enough."""
-    pred = _model_reduction(it, Bs, sol.d, bounds, penalty)
+    pred = _model_reduction(it, qp.B, sol.d, bounds, penalty)  # qp.B: B̃
     merit0 = it.f + penalty * float(np.sum(bounds.violation(it.g)))
     if pred <= 1e-16 * max(1.0, abs(merit0)):
         return None
