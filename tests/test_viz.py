@@ -180,11 +180,12 @@ def test_html_is_one_offline_file(files, tmp_path):
     assert text.count("</script>") == 4  # three.js, OrbitControls, data, the viewer
 
 
-def _no_browser(msg: str) -> None:
-    """Skip, or fail when CI requires the browser test (``.ci/run`` sets the variable)."""
+def _no_browser(reason: str) -> None:
+    """Skip for ``reason`` (what is missing and how to install it), or fail with it when CI
+    requires the browser test (``.ci/run`` sets the variable)."""
     if os.environ.get("POSTUREGEN_REQUIRE_BROWSER") == "1":
-        pytest.fail(msg)
-    pytest.skip(msg)
+        pytest.fail(reason)
+    pytest.skip(reason=reason)
 
 
 @pytest.fixture
