@@ -376,3 +376,51 @@ def test_a_trial_point_where_the_functions_are_not_finite_is_rejected():
     run = sqp(_NaNBeyond(), np.zeros(1), bounds, SQPOptions(max_iter=50))  # type: ignore[arg-type]
     assert np.isfinite(run.f) and run.x[0] <= 1.5
     assert run.x[0] > 1.0  # it moved towards the optimum as far as the functions allow
+
+
+def _torque_rows(problem) -> slice:
+    return Program.of(problem).compile().g_index["torque_limits"]
+
+
+@pytest.mark.parametrize("bound", [False, True])
+def test_torque_continuation_runs_only_when_the_limits_bound_the_sqp(
+    free_problems, monkeypatch, bound
+):
+    """A failed SQP whose torque rows bound none of its steps is not run again with the limits
+    relaxed (it would take the same steps); one whose torque rows bound is."""
+    problem = _with(free_problems[1], method="sqp")
+    rows = _torque_rows(problem)
+    real, scales = runs_module.sqp, []
+
+    def failing(oracle, x0, bounds, options, **kwargs):
+        run = real(oracle, x0, bounds, options, **kwargs)
+        scales.append(float(bounds.ubg[rows].max()))
+        run.status = "Infeasible_Problem_Detected"
+        run.rows_bound = np.zeros_like(run.rows_bound)
+        run.rows_bound[rows.start] = bound
+        return run
+
+    monkeypatch.setattr(runs_module, "sqp", failing)
+    result = solve(problem)
+    assert not result.success
+    assert scales == ([1.0, 2.0] if bound else [1.0])
+
+
+def test_the_sqp_marks_the_rows_that_bound_its_steps(free_problems, monkeypatch):
+    """rows_bound holds every row with a multiplier at the solution; the torque rows when the
+    limits are tight enough to bind, not when they are ten times Talos' own."""
+    real, seen = runs_module.sqp, []
+
+    def kept(*args, **kwargs):
+        seen.append(real(*args, **kwargs))
+        return seen[-1]
+
+    monkeypatch.setattr(runs_module, "sqp", kept)
+    problem = _with(free_problems[1], method="sqp")
+    rows = _torque_rows(problem)
+    for scale, binds in ((10.0, False), (0.05, True)):
+        seen.clear()
+        result = solve(dataclasses.replace(problem, torque_limit_scale=scale))
+        assert result.success == (not binds)
+        assert np.all(seen[-1].rows_bound[seen[-1].lam_g != 0])
+        assert seen[0].rows_bound[rows].any() == binds

@@ -77,6 +77,9 @@ class Run:
     lam_g: np.ndarray | None = None
     method: str = "ipopt"  # the solver that ran: "sqp" or "ipopt"
     p_casadi: Any = None  # p as the CasADi column IPOPT was given (the re-check reuses it)
+    # (m,) the SQP's rows that bound it (SQPRun.rows_bound); None for IPOPT, whose barrier
+    # sees every bound
+    rows_bound: np.ndarray | None = None
 
     @property
     def ok(self) -> bool:
@@ -262,6 +265,7 @@ def _sqp(start: _Start) -> Run:
         solve_time_s=run.wall_s,
         lam_x=run.lam_x,
         lam_g=run.lam_g,
+        rows_bound=run.rows_bound,
     )
 
 

@@ -160,9 +160,10 @@ def solve(problem: Problem, x0: np.ndarray | None = None, start: Solved | None =
     posture then fails the mesh check, the margin grows by 1 cm and the loop runs again.
     The pairs used are remembered per problem structure; the next problem of that structure
     starts with them. When IPOPT does not converge, two continuations follow: without the
-    collision rows, then with the torque limits relaxed, each solution starting the real
-    program again. A stance whose fixed contacts place two links' meshes into each other
-    cannot pass the mesh check: one run without collision rows, and the message says so
+    collision rows, then with the torque limits relaxed (for the SQP, only when a torque row
+    bound one of its steps), each solution starting the real program again. A stance whose
+    fixed contacts place two links' meshes into each other cannot pass the mesh check: one
+    run without collision rows, and the message says so
     (:func:`posturegen.collision.active_set.placed_blocked`). ``max_call_iter`` bounds the
     whole call, each run to what is left of it. The Result counts every IPOPT run. Why a
     failure failed: :func:`posturegen.solver.diagnose.diagnose`.
@@ -202,7 +203,7 @@ def _solve(problem: Problem, x0: np.ndarray | None, start: Solved | None) -> Res
     effort = problem.robot.effort_limit
     if result.success or result.status in _IPOPT_OK or not np.any(np.isfinite(effort)):
         return result
-    if not budget_left():
+    if not budget_left() or not _torque_limits_bound(runs):
         return result
     relaxed = program.but(torque_limit_scale=program.torque_limit_scale * TORQUE_CONTINUATION)
     _, relaxed_runs = _solve_continued(relaxed, x_start, runs)
@@ -210,6 +211,20 @@ def _solve(problem: Problem, x0: np.ndarray | None, start: Solved | None) -> Res
         return _counted(result, relaxed_runs)
     retry, retry_runs = _solve_continued(program, relaxed_runs[-1].x, relaxed_runs)
     return retry if retry.success else _counted(result, retry_runs)
+
+
+def _torque_limits_bound(runs: list[Run]) -> bool:
+    """Whether relaxing the torque limits can change a run: an IPOPT run's barrier sees every
+    bound; an SQP run's steps are the same unless a torque row was violated at an iterate or
+    had a multiplier in a step's QP (relaxed, the same steps hold and stay optimal: the
+    continuation would replay its runs, on the near-body family 27 % of its iterations)."""
+    for run in runs:
+        if run.rows_bound is None:
+            return True
+        rows = run.compiled.g_index.get("torque_limits")
+        if rows is not None and run.rows_bound[rows].any():
+            return True
+    return False
 
 
 def _counted(result: Result, runs: list[Run]) -> Result:

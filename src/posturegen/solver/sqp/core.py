@@ -87,6 +87,9 @@ class SQPRun:
     relaxed_qps: int = 0
     elastic_qps: int = 0
     history: list[tuple[float, float, float]] = field(default_factory=list)  # f, viol, Δ
+    # (m,) the rows that bound the run: violated at an iterate or with a multiplier in a
+    # step's QP; a bound of the other rows can be relaxed without changing any step
+    rows_bound: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
 @dataclass
@@ -134,6 +137,7 @@ def sqp(
     scaled: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     stall = _Stall(float(np.sum(bounds.violation(it.g))))
     for _ in range(options.max_iter):
+        run.rows_bound |= bounds.violation(it.g) > 0
         stop = _stop(it, lam_g, lam_x, bounds, options, stall, t0)
         if stop is not None:
             run.status = stop
@@ -217,6 +221,7 @@ def _first(
     lam_g = np.zeros(oracle.m) if lam_g0 is None else np.array(lam_g0, dtype=float)
     lam_x = np.zeros(oracle.n) if lam_x0 is None else np.array(lam_x0, dtype=float)
     run = SQPRun(x, 0.0, lam_g, lam_x, "Maximum_Iterations_Exceeded", 0, 0, duals0, 0.0)
+    run.rows_bound = np.zeros(oracle.m, dtype=bool)
     return run, _Iterate(x, *oracle.first_order(x))
 
 
@@ -239,6 +244,8 @@ def _step(
         sol, penalty = _elastic(qp, it, penalty, options, run)
         sol = _unscaled(sol, bounds.scale)
     run.qp_iterations += sol.iterations
+    if sol.solved:
+        run.rows_bound |= sol.lam_rows != 0
     return sol, penalty
 
 
