@@ -20,7 +20,15 @@ from posturegen.solver.problem import Program, SolverOptions
 from posturegen.solver.qp import registry
 from posturegen.solver.qp.base import QP, QPSolution
 from posturegen.solver.runs import variable_scales
-from posturegen.solver.sqp.core import Bounds, SQPOptions, SQPRun, sqp
+from posturegen.solver.sqp.core import (
+    LINEAR_TOL,
+    Bounds,
+    SQPOptions,
+    SQPRun,
+    _Iterate,
+    _model_reduction,
+    sqp,
+)
 from posturegen.solver.sqp.hessian import CURVATURE_MAX, DELTA, convexified
 from posturegen.solver.sqp.oracle import Oracle
 
@@ -424,3 +432,22 @@ def test_the_sqp_marks_the_rows_that_bound_its_steps(free_problems, monkeypatch)
         assert result.success == (not binds)
         assert np.all(seen[-1].rows_bound[seen[-1].lam_g != 0])
         assert seen[0].rows_bound[rows].any() == binds
+
+
+def test_the_model_counts_no_linearized_residue_below_the_qps_tolerance():
+    """At a feasible point, a step whose linearized rows miss their bounds by the QP's own
+    tolerance (1e-10 a row) still promises its cost's decrease, whatever ν; a row missed by
+    more than LINEAR_TOL is charged ν per unit."""
+    bounds = Bounds(
+        np.full(2, -1.0), np.full(2, 1.0), np.zeros(3), np.zeros(3), np.ones(2)
+    )  # g(x) = 0 on three equality rows
+    grad = np.array([1.0, 0.0])
+    J = np.zeros((3, 2))
+    J[0, 1] = 1.0  # the rows move with x₁ only, the cost with x₀
+    it = _Iterate(np.zeros(2), 0.0, grad, np.zeros(3), J)
+    Bs = np.eye(2)
+    d = np.array([-1e-3, 5e-10])  # row 0 off by 5e-10: the QP's residue
+    assert _model_reduction(it, Bs, d, bounds, 1e8) == pytest.approx(1e-3 - 0.5e-6, rel=1e-9)
+    d[1] = 10 * LINEAR_TOL
+    charged = _model_reduction(it, Bs, d, bounds, 1e8)
+    assert charged == pytest.approx(1e-3 - 0.5e-6 - 1e8 * 10 * LINEAR_TOL, rel=1e-6)

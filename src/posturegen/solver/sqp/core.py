@@ -364,11 +364,23 @@ def _steered(it: _Iterate, Bs: np.ndarray, d: np.ndarray, bounds: Bounds, penalt
     """ν large enough that the step's predicted reduction is at least half its reduction of
     the linearized violation, ν ≥ (∇fᵀd + ½dᵀBd) / ((1 - 0.5) Δv) (Nocedal & Wright, 18.36):
     ν follows what the steps need, not the QP's multipliers (a degenerate QP's run to 1e4)."""
-    dv = float(np.sum(bounds.violation(it.g)) - np.sum(bounds.violation(it.g + it.J @ d)))
+    dv = float(np.sum(bounds.violation(it.g))) - _linearized_violation(it, d, bounds)
     q = float(it.grad @ d) + _curvature(Bs, d, bounds.scale)
     if dv > 1e-14 and q > 0:
         penalty = max(penalty, q / (0.5 * dv))
     return min(penalty, PENALTY_MAX)
+
+
+# [row units] a linearized row within this of its bound holds in the merit's model: the QP
+# holds its rows to 1e-10 each (daqp's tolerance), and counted, those residues made a Talos
+# touch's model promise less than nothing at a feasible point, its region shrinking to nothing
+LINEAR_TOL = 1e-9
+
+
+def _linearized_violation(it: _Iterate, d: np.ndarray, bounds: Bounds) -> float:
+    """‖viol(g + J d)‖₁, the rows within LINEAR_TOL of their bounds counted as holding."""
+    v = bounds.violation(it.g + it.J @ d)
+    return float(np.sum(v[v > LINEAR_TOL]))
 
 
 def _model_reduction(
@@ -376,7 +388,7 @@ def _model_reduction(
 ) -> float:
     """ν‖viol(g)‖₁ - (∇fᵀd + ½dᵀBd + ν‖viol(g + J d)‖₁): what the step promises."""
     v0 = float(np.sum(bounds.violation(it.g)))
-    v1 = float(np.sum(bounds.violation(it.g + it.J @ d)))
+    v1 = _linearized_violation(it, d, bounds)
     return penalty * (v0 - v1) - float(it.grad @ d) - _curvature(Bs, d, bounds.scale)
 
 
