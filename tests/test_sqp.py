@@ -451,3 +451,25 @@ def test_the_model_counts_no_linearized_residue_below_the_qps_tolerance():
     d[1] = 10 * LINEAR_TOL
     charged = _model_reduction(it, Bs, d, bounds, 1e8)
     assert charged == pytest.approx(1e-3 - 0.5e-6 - 1e8 * 10 * LINEAR_TOL, rel=1e-6)
+
+
+def test_an_sqp_run_from_a_start_the_call_already_ran_is_not_made_again(free_problems):
+    """Within one call (one Budget), a second SQP run from the same start (or within
+    REPLAY_TOL of it) is the first run replayed: the same solution, no iteration; a start
+    farther away, other bounds or no call at all run the SQP."""
+    program = Program.of(_with(free_problems[2], method="sqp"))
+    x0 = program.numeric(program.compile())[0]
+    token = runs_module.BUDGET.set(runs_module.Budget(None))
+    try:
+        first = runs_module.run_nlp(program, x0)[-1]
+        again = runs_module.run_nlp(program, x0 + 0.1 * runs_module.REPLAY_TOL)[-1]
+        moved = runs_module.run_nlp(program, x0 + 1e-3)[-1]
+        looser = program.but(torque_limit_scale=2.0)
+        relaxed = runs_module.run_nlp(looser, x0)[-1]
+    finally:
+        runs_module.BUDGET.reset(token)
+    outside = runs_module.run_nlp(program, x0)[-1]
+    assert first.ok and first.iterations > 3 and not first.replayed
+    assert again.replayed and again.iterations == 0 and np.array_equal(again.x, first.x)
+    for run in (moved, relaxed, outside):
+        assert not run.replayed and run.iterations > 0

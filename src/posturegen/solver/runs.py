@@ -29,10 +29,12 @@ _IPOPT_OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
 class Budget:
     """The iterations one call of :func:`~posturegen.solver.solve.solve` may spend
     (SolverOptions.max_call_iter) and has spent: each run is charged (SQP and IPOPT
-    iterations alike); once spent, no run starts."""
+    iterations alike); once spent, no run starts. It keeps the call's SQP runs too: a run
+    from where one of them started is not made again (:class:`_Tried`)."""
 
     limit: int | None
     spent: int = 0
+    tried: list[_Tried] = dataclasses.field(default_factory=list)
 
     def left(self) -> bool:
         return self.limit is None or self.spent < self.limit
@@ -76,6 +78,7 @@ class Run:
     lam_x: np.ndarray | None = None
     lam_g: np.ndarray | None = None
     method: str = "ipopt"  # the solver that ran: "sqp" or "ipopt"
+    replayed: bool = False  # an SQP run of the call from the same start, not made again
     p_casadi: Any = None  # p as the CasADi column IPOPT was given (the re-check reuses it)
     # (m,) the SQP's rows that bound it (SQPRun.rows_bound); None for IPOPT, whose barrier
     # sees every bound
@@ -155,11 +158,74 @@ def run_nlp(
     start = _start(program, x0, lam_x0, lam_g0, joints0, layout)
     if method == "ipopt":
         return [_charged(_ipopt(start))]
-    first = _charged(_sqp(start))
+    first = _charged(_sqp_once(start))
     if method == "sqp" or first.ok or not budget_left():
         return [first]
     retry = _start(program, x0, lam_x0, lam_g0, joints0, layout)  # the budget left
     return [first, _charged(_ipopt(retry))]
+
+
+# [scaled units: rad, m, N / robot weight] an SQP run whose start is within this of where a
+# run of the same call started (the same structure, parameters, bounds and options; its
+# multipliers within it too, relative) would take the same steps: it is not made again. A
+# near-body reach whose active-set loop failed ran its collision-free continuation, and the
+# loop restarted from there fell back onto the first loop's starts and runs (27, 66, 79 and
+# 100 iterations, again)
+REPLAY_TOL = 1e-6
+
+
+@dataclass
+class _Tried:
+    """An SQP run of the call and where it started."""
+
+    start: _Start
+    run: Run
+
+    def repeats(self, start: _Start) -> bool:
+        """Whether an SQP run from ``start`` would take this run's steps."""
+        old = self.start
+        if start.compiled is not old.compiled or not _same_options(start, old, self.run):
+            return False
+        for a, b in ((start.p, old.p), (start.lbg, old.lbg), (start.ubg, old.ubg)):
+            if not np.array_equal(a, b):
+                return False
+        scale = variable_scales(start.compiled, start.program.robot.weight)
+        if np.max(np.abs(start.x - old.x) / scale, initial=0.0) > REPLAY_TOL:
+            return False
+        return _near(start.lam_g, old.lam_g) and _near(start.lam_x, old.lam_x)
+
+
+def _same_options(start: _Start, old: _Start, run: Run) -> bool:
+    """The same solver options, but for an iteration cap that ``run`` did not reach."""
+    new_options, old_options = start.program.solver_options, old.program.solver_options
+    if new_options == old_options:
+        return True
+    capped = run.status == "Maximum_Iterations_Exceeded"
+    same_but_cap = dataclasses.replace(new_options, max_iter=old_options.max_iter) == old_options
+    return same_but_cap and not capped and run.iterations <= new_options.max_iter
+
+
+def _near(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    """Both absent, or within REPLAY_TOL relative to the larger multiplier."""
+    if a is None or b is None:
+        return a is None and b is None
+    size = max(1.0, float(np.max(np.abs(b), initial=0.0)))
+    return a.shape == b.shape and float(np.max(np.abs(a - b), initial=0.0)) <= REPLAY_TOL * size
+
+
+def _sqp_once(start: _Start) -> Run:
+    """The SQP from ``start``, or the run of this call that started there (replayed: no
+    iteration, no time)."""
+    budget = BUDGET.get()
+    tried = [] if budget is None else budget.tried
+    for earlier in tried:
+        if earlier.repeats(start):
+            return dataclasses.replace(
+                earlier.run, iterations=0, solve_time_s=0.0, build_time_s=0.0, replayed=True
+            )
+    run = _sqp(start)
+    tried.append(_Tried(start, run))
+    return run
 
 
 def _charged(run: Run) -> Run:
