@@ -17,8 +17,9 @@ from posturegen.errors import InputError, PosturegenError
 from posturegen.solver import runs as runs_module
 from posturegen.solver.inspection import initial_collision_term
 from posturegen.solver.problem import Program, SolverOptions
-from posturegen.solver.qp import registry
+from posturegen.solver.qp import proxsuite_backend, registry
 from posturegen.solver.qp.base import QP, QPSolution
+from posturegen.solver.qp.proxsuite_backend import ProxsuiteBackend
 from posturegen.solver.runs import variable_scales
 from posturegen.solver.sqp.core import (
     LINEAR_TOL,
@@ -118,6 +119,18 @@ def test_an_unloads_qp_is_infeasible_at_once_not_failed(monkeypatch):
     monkeypatch.setattr(proxsuite, "solve", lambda q: asked.append(q) or None)
     assert registry.solve(qp).status == "infeasible"
     assert not asked
+
+
+def test_proxsuite_gives_up_on_a_capped_curvature_qp_within_its_iteration_bound():
+    """A QP of the SQP on HRP-2's vertical-ladder unload whose B̃ reached the curvature cap
+    (eigenvalues 1e-4 to 1e8): daqp fails on it, and proxsuite, its fallback, bounded only in
+    its outer iterations, ran 374,275 iterations (61 s) to fail too. Bounded in both, it
+    fails after at most MAX_ITER · MAX_ITER_IN."""
+    data = np.load(Path(__file__).parent / "data" / "capped_curvature_qp.npz")
+    qp = QP(*(data[k] for k in ("B", "c", "A", "lb", "ub", "lbA", "ubA", "equal")))
+    sol = ProxsuiteBackend().solve(qp)
+    assert sol.status != "solved"
+    assert sol.iterations <= proxsuite_backend.MAX_ITER * proxsuite_backend.MAX_ITER_IN
 
 
 def test_a_solution_that_is_not_finite_is_a_failure(monkeypatch):
