@@ -28,6 +28,7 @@ from posturegen.solver.sqp.core import (
     SQPRun,
     _Iterate,
     _model_reduction,
+    _reachable,
     sqp,
 )
 from posturegen.solver.sqp.hessian import CURVATURE_MAX, DELTA, convexified
@@ -429,7 +430,8 @@ def test_torque_continuation_runs_only_when_the_limits_bound_the_sqp(
 
 def test_the_sqp_marks_the_rows_that_bound_its_steps(free_problems, monkeypatch):
     """rows_bound holds every row with a multiplier at the solution; the torque rows when the
-    limits are tight enough to bind, not when they are ten times Talos' own."""
+    limits are tight enough to bind; at ten times Talos' own limits, only when a QP of the
+    run had no solution (a row within reach of its region may be why)."""
     real, seen = runs_module.sqp, []
 
     def kept(*args, **kwargs):
@@ -444,7 +446,30 @@ def test_the_sqp_marks_the_rows_that_bound_its_steps(free_problems, monkeypatch)
         result = solve(dataclasses.replace(problem, torque_limit_scale=scale))
         assert result.success == (not binds)
         assert np.all(seen[-1].rows_bound[seen[-1].lam_g != 0])
-        assert seen[0].rows_bound[rows].any() == binds
+        first = seen[0]
+        if binds:
+            assert first.rows_bound[rows].any()
+        else:
+            infeasible_qps = first.relaxed_qps + first.elastic_qps
+            assert not first.rows_bound[rows].any() or infeasible_qps > 0
+
+
+def test_rows_out_of_reach_of_the_region_cannot_be_why_a_qp_has_no_solution():
+    """_reachable: a row that every d of the box satisfies is not marked; a row the box's
+    corners cross is, and so is one already violated at d = 0."""
+    A = np.array([[1.0, 1.0], [1.0, -1.0], [0.0, 1.0]])
+    box = np.full(2, 0.5)
+    qp = QP(
+        np.eye(2),
+        np.zeros(2),
+        A,
+        -box,
+        box,
+        np.array([-2.0, -0.5, 0.2]),  # row 0: A d in [-1, 1] inside [-2, 2]
+        np.array([2.0, 0.5, 1.0]),  # row 1: [-1, 1] crosses ±0.5; row 2: needs d₁ >= 0.2
+        np.zeros(3, dtype=bool),
+    )
+    np.testing.assert_array_equal(_reachable(qp), [False, True, True])
 
 
 def test_the_model_counts_no_linearized_residue_below_the_qps_tolerance():

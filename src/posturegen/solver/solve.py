@@ -215,9 +215,10 @@ def _solve(problem: Problem, x0: np.ndarray | None, start: Solved | None) -> Res
 
 def _torque_limits_bound(runs: list[Run]) -> bool:
     """Whether relaxing the torque limits can change a run: an IPOPT run's barrier sees every
-    bound; an SQP run's steps are the same unless a torque row was violated at an iterate or
-    had a multiplier in a step's QP (relaxed, the same steps hold and stay optimal: the
-    continuation would replay its runs, on the near-body family 27 % of its iterations)."""
+    bound; an SQP run's steps are the same unless a torque row was violated at an iterate,
+    had a multiplier in a step's QP or was within reach of a region whose QP had no solution
+    (SQPRun.rows_bound; else, relaxed, the same steps hold and stay optimal, and the
+    continuation would replay its runs)."""
     for run in runs:
         if run.rows_bound is None:
             return True

@@ -87,8 +87,9 @@ class SQPRun:
     relaxed_qps: int = 0
     elastic_qps: int = 0
     history: list[tuple[float, float, float]] = field(default_factory=list)  # f, viol, Δ
-    # (m,) the rows that bound the run: violated at an iterate or with a multiplier in a
-    # step's QP; a bound of the other rows can be relaxed without changing any step
+    # (m,) the rows that bound the run: violated at an iterate, with a multiplier in a step's
+    # QP, or within reach of a region whose QP had no solution; a bound of the other rows can
+    # be relaxed without changing any step
     rows_bound: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
@@ -320,6 +321,7 @@ def _relaxed(qp: QP, options: SQPOptions, run: SQPRun) -> QPSolution:
     sol = registry.solve(qp, options.qp)
     if sol.status != "infeasible":
         return sol
+    run.rows_bound |= _reachable(qp)  # any of them may be why it has no solution
     lower, upper = qp.lbA > 0, qp.ubA < 0  # rows violated at d = 0
     for theta in THETAS:
         run.relaxed_qps += 1
@@ -332,6 +334,14 @@ def _relaxed(qp: QP, options: SQPOptions, run: SQPRun) -> QPSolution:
         if sol.status != "infeasible":
             return sol
     return sol
+
+
+def _reachable(qp: QP) -> np.ndarray:
+    """(m,) the rows whose bounds some d of the region's box meets (lb <= d <= ub): the
+    others hold for every d in it, and a QP without a solution has it whatever their bounds."""
+    low = np.minimum(qp.A * qp.lb, qp.A * qp.ub).sum(axis=1)  # min of A d over the box
+    high = np.maximum(qp.A * qp.lb, qp.A * qp.ub).sum(axis=1)
+    return (low <= qp.lbA) | (high >= qp.ubA)
 
 
 # ν ×10 at most this many times within one step's elastic QPs: a linearization whose violation
