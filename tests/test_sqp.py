@@ -99,22 +99,19 @@ def test_daqp_reuses_its_workspace_only_for_the_same_matrices():
     assert np.abs(again.d - daqp.solve(variants[0]).d).max() > 1e-6  # B doubled: another step
 
 
+def _recorded_qp(name: str) -> QP:
+    """A QP an SQP run met, saved in tests/data (its rows with lbA == ubA are equalities)."""
+    data = np.load(Path(__file__).parent / "data" / name)
+    arrays = (data[k] for k in ("B", "c", "A", "lb", "ub", "lbA", "ubA"))
+    return QP(*arrays, data["lbA"] == data["ubA"])
+
+
 def test_an_unloads_qp_is_infeasible_at_once_not_failed(monkeypatch):
     """A QP of the SQP on Talos' unload off the ground (stairs plan; dependent equality rows,
     38 free collision rows): daqp says infeasible without the fallback. With a workspace's
     default settings daqp answered "overdetermined initial working set" and proxsuite then
     ran 28 s."""
-    data = np.load(Path(__file__).parent / "data" / "unload_qp.npz")
-    qp = QP(
-        data["B"],
-        data["c"],
-        data["A"],
-        data["lb"],
-        data["ub"],
-        data["lbA"],
-        data["ubA"],
-        data["lbA"] == data["ubA"],
-    )
+    qp = _recorded_qp("unload_qp.npz")
     asked = []
     proxsuite = registry.backend("proxsuite")
     monkeypatch.setattr(proxsuite, "solve", lambda q: asked.append(q) or None)
@@ -127,9 +124,7 @@ def test_proxsuite_gives_up_on_a_capped_curvature_qp_within_its_iteration_bound(
     (eigenvalues 1e-4 to 1e8): daqp fails on it, and proxsuite, its fallback, bounded only in
     its outer iterations, ran 374,275 iterations (61 s) to fail too. Bounded in both, it
     fails after at most MAX_ITER · MAX_ITER_IN."""
-    data = np.load(Path(__file__).parent / "data" / "capped_curvature_qp.npz")
-    qp = QP(*(data[k] for k in ("B", "c", "A", "lb", "ub", "lbA", "ubA", "equal")))
-    sol = ProxsuiteBackend().solve(qp)
+    sol = ProxsuiteBackend().solve(_recorded_qp("capped_curvature_qp.npz"))
     assert sol.status != "solved"
     assert sol.iterations <= proxsuite_backend.MAX_ITER * proxsuite_backend.MAX_ITER_IN
 
