@@ -23,6 +23,7 @@ import pinocchio as pin
 from ..collision.active_set import box_label
 from ..model.kinematics import scratch_data
 from ..terms.elastic import Elastic, slack_values
+from ..terms.equilibrium import TORQUE_LIMITS
 from ..terms.tasks import Task
 from .problem import Program
 from .runs import _IPOPT_OK, run_nlp
@@ -374,7 +375,7 @@ def _obstacle_at(boxes: Any, point: Any) -> str | None:
 
 
 def _torque_causes(r: Relaxed) -> Iterator[Cause]:
-    s = r.slacks.get("torque_limits")
+    s = r.slacks.get(TORQUE_LIMITS)
     if s is None:
         return
     robot = r.problem.robot
@@ -384,7 +385,7 @@ def _torque_causes(r: Relaxed) -> Iterator[Cause]:
         name = robot.joint_names[finite[k]]
         pct = 100.0 * abs(float(s[k])) / scale
         text = f"torque limit of {name} exceeded by {pct:.0f} %"
-        yield Cause("torque", name, pct, "%", text, _penalty(r, "torque_limits", s[k : k + 1]))
+        yield Cause("torque", name, pct, "%", text, _penalty(r, TORQUE_LIMITS, s[k : k + 1]))
 
 
 # contact blocks: (row kind, rows measuring a length [m] (others: sines of angles))

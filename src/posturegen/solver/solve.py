@@ -24,6 +24,7 @@ from ..collision.rows import CollisionTerm
 from ..collision.separation import separated_start
 from ..collision.slots import Capacity
 from ..io.posture_file import add_solve_fields, posture_dict, write_posture
+from ..terms.equilibrium import TORQUE_LIMITS
 from ..verify import VerifyReport, verify_posture
 from .compile import casadi_column, initial_guess, layout_of
 from .problem import Problem, Program, SolverOptions
@@ -222,7 +223,7 @@ def _torque_limits_bound(runs: list[Run]) -> bool:
     for run in runs:
         if run.rows_bound is None:
             return True
-        rows = run.compiled.g_index.get("torque_limits")
+        rows = run.compiled.g_index.get(TORQUE_LIMITS)
         if rows is not None and run.rows_bound[rows].any():
             return True
     return False

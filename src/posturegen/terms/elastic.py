@@ -26,6 +26,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from .equilibrium import TORQUE_LIMITS
+
 SLACK_PREFIX = "slack."
 
 
@@ -50,7 +52,7 @@ class Elastic:
 
 def category(block: str) -> str | None:
     """The category of a constraint block from its name (None: a block that stays hard)."""
-    if block == "torque_limits":
+    if block == TORQUE_LIMITS:
         return "torque"
     if block.startswith("task"):
         return "task"

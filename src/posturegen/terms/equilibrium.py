@@ -10,6 +10,8 @@ import numpy as np
 
 from .nlp import BuildContext, Instance, Term
 
+TORQUE_LIMITS = "torque_limits"  # the block of |τ_j| / effort_j <= s rows
+
 
 class StaticEquilibrium(Term):
     """τ + Jᵀf = g(q): six base rows (zero resultant wrench, world frame, scaled by the weight)
@@ -32,7 +34,7 @@ class StaticEquilibrium(Term):
         finite = np.flatnonzero(np.isfinite(robot.effort_limit))
         if finite.size:
             scaled = ca.vertcat(*[tau[i] / robot.effort_limit[i] for i in finite])
-            nlp.constrain("torque_limits", scaled, -1.0, 1.0)  # scaled per instance: bounds()
+            nlp.constrain(TORQUE_LIMITS, scaled, -1.0, 1.0)  # scaled per instance: bounds()
         nlp.output("torques", tau)
         ctx.torques = tau
 
@@ -43,4 +45,4 @@ class StaticEquilibrium(Term):
         if not np.any(np.isfinite(problem.robot.effort_limit)):
             return {}
         s = problem.torque_limit_scale
-        return {"torque_limits": (-s, s)}
+        return {TORQUE_LIMITS: (-s, s)}
