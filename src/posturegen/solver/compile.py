@@ -430,13 +430,6 @@ def _declare(program: Compilable) -> _Program:
     )
 
 
-def casadi_column(v: np.ndarray) -> ca.DM:
-    """v (n,) as CasADi's column, made from its list: CasADi reads a NumPy array element by
-    element (1.5 ms for Talos' 18,093 collision parameters, each IPOPT run and each re-check
-    paid it), a list in half that."""
-    return ca.DM(np.asarray(v, dtype=float).ravel().tolist())
-
-
 def numeric(
     program: Compilable, compiled: _Layout
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

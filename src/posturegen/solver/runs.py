@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 
 from .._cache import BoundedCache, Ref
-from .compile import CACHE_SIZE, CompiledNLP, casadi_column, is_compiled
+from .buffered import Buffered
+from .compile import CACHE_SIZE, CompiledNLP, is_compiled
 from .problem import Program
 from .sqp.core import Bounds, SQPOptions, sqp
 from .sqp.oracle import Oracle
@@ -79,7 +80,6 @@ class Run:
     lam_g: np.ndarray | None = None
     method: str = "ipopt"  # the solver that ran: "sqp" or "ipopt"
     replayed: bool = False  # an SQP run of the call from the same start, not made again
-    p_casadi: Any = None  # p as the CasADi column IPOPT was given (the re-check reuses it)
     # (m,) the SQP's rows that bound it (SQPRun.rows_bound); None for IPOPT, whose barrier
     # sees every bound
     rows_bound: np.ndarray | None = None
@@ -235,37 +235,44 @@ def _charged(run: Run) -> Run:
     return run
 
 
+# IPOPT's call per solver, into preallocated arrays (posturegen.solver.buffered): its memory
+# (the IPOPT application) and its 18,093 parameters of Talos' collision slots stay in place
+_IPOPT_CALLS: BoundedCache[Buffered] = BoundedCache("IPOPT calls", CACHE_SIZE)
+
+
 def _ipopt(start: _Start) -> Run:
     """IPOPT from ``start`` (warm when it has multipliers and the options say so)."""
     compiled = start.compiled
-    warm: dict[str, Any] = {}
-    if start.lam_g is not None and start.lam_x is not None:
-        warm = {"lam_x0": start.lam_x, "lam_g0": start.lam_g}
-    p = casadi_column(start.p)
-    with compiled.lock:  # a solver's stats() are those of its last call: one thread at a time
+    warm = start.lam_g is not None and start.lam_x is not None
+    with compiled.lock:  # the call's arrays and memory are the structure's: one at a time
+        call = _IPOPT_CALLS.get_or_make(Ref(compiled.solver), lambda: Buffered(compiled.solver))
+        for name, value in (
+            ("x0", start.x),
+            ("p", start.p),
+            ("lbx", compiled.lbx),
+            ("ubx", compiled.ubx),
+            ("lbg", start.lbg),
+            ("ubg", start.ubg),
+            ("lam_x0", start.lam_x if warm else 0.0),
+            ("lam_g0", start.lam_g if warm else 0.0),
+        ):
+            call.arg(name)[:] = value
         t0 = time.perf_counter()
-        sol = compiled.solver(
-            x0=start.x,
-            p=p,
-            lbx=compiled.lbx,
-            ubx=compiled.ubx,
-            lbg=start.lbg,
-            ubg=start.ubg,
-            **warm,
-        )
+        call()
         wall = time.perf_counter() - t0
-        stats = compiled.solver.stats()
+        stats = call.stats()
+        x, f = call.res("x").copy(), float(call.res("f")[0])
+        lam_x, lam_g = call.res("lam_x").copy(), call.res("lam_g").copy()
     return _run_of(
         start,
         "ipopt",
-        x=np.array(sol["x"]).ravel(),
-        f=float(sol["f"]),
+        x=x,
+        f=f,
         status=str(stats.get("return_status", "unknown")),
         iterations=int(stats.get("iter_count", -1)),
         solve_time_s=float(stats.get("t_wall_total", wall)),
-        lam_x=np.array(sol["lam_x"]).ravel(),
-        lam_g=np.array(sol["lam_g"]).ravel(),
-        p_casadi=p,
+        lam_x=lam_x,
+        lam_g=lam_g,
     )
 
 

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .._cache import BoundedCache
+from .._cache import BoundedCache, Ref
 from ..collision.active_set import ActiveSet, placed_blocked
 from ..collision.boxes import TIGHTEN_STEP
 from ..collision.rows import CollisionTerm
@@ -26,7 +26,8 @@ from ..collision.slots import Capacity
 from ..io.posture_file import add_solve_fields, posture_dict, write_posture
 from ..terms.equilibrium import TORQUE_LIMITS
 from ..verify import VerifyReport, verify_posture
-from .compile import casadi_column, initial_guess, layout_of
+from .buffered import Buffered
+from .compile import CACHE_SIZE, initial_guess, layout_of
 from .problem import Problem, Program, SolverOptions
 from .runs import (
     _IPOPT_OK,
@@ -251,11 +252,19 @@ def _by_method(runs: list[Run]) -> dict[str, int]:
     return {m: sum(r.iterations for r in runs if r.method == m) for m in {r.method for r in runs}}
 
 
+# the outputs' call per function, into preallocated arrays (posturegen.solver.buffered)
+_OUTPUT_CALLS: BoundedCache[Buffered] = BoundedCache("output calls", CACHE_SIZE)
+
+
 def _outputs(run: Run) -> dict[str, np.ndarray]:
     """The program's outputs at a run's solution, flattened (column-major)."""
-    p = run.p_casadi if run.p_casadi is not None else casadi_column(run.p)
-    out = run.compiled.outputs(x=run.x, p=p)
-    return {k: np.array(v).ravel(order="F") for k, v in out.items()}
+    fn = run.compiled.outputs
+    with run.compiled.lock:  # the call's arrays are the structure's: one at a time
+        call = _OUTPUT_CALLS.get_or_make(Ref(fn), lambda: Buffered(fn))
+        call.arg("x")[:] = run.x
+        call.arg("p")[:] = run.p
+        call()
+        return {fn.name_out(i): call.column(i) for i in range(fn.n_out())}
 
 
 def _solve_continued(

@@ -2,47 +2,16 @@
 gradient ∇f (n,), the constraints g (m,), their Jacobian J (m, n) and the Hessian of the
 Lagrangian ∇²(σ f + λᵀ g) (n, n). They are the functions IPOPT calls (generated C when the
 structure's library is built, :mod:`posturegen.solver.codegen`), taken from its solver and
-evaluated through CasADi's buffers: the inputs and outputs are numpy arrays written in place
-(a call through ``Function.call`` and ``DM.full`` cost 74 µs more each, more than the
-generated code of Talos' Jacobian itself)."""
+evaluated through CasADi's buffers (:mod:`posturegen.solver.buffered`): the inputs and
+outputs are numpy arrays written in place (a call through ``Function.call`` and ``DM.full``
+cost 74 µs more each, more than the generated code of Talos' Jacobian itself)."""
 
 from __future__ import annotations
-
-from collections.abc import Callable
 
 import casadi as ca
 import numpy as np
 
-
-class _Buffered:
-    """One function evaluated into preallocated arrays: its inputs (set in place by the
-    caller), its outputs' nonzeros, and where those go in a dense array."""
-
-    def __init__(self, fn: ca.Function, inputs: list[np.ndarray]) -> None:
-        self.inputs = inputs
-        self.outputs = [np.zeros(fn.nnz_out(i)) for i in range(fn.n_out())]
-        buffer, self._trigger = fn.buffer()
-        for i, a in enumerate(inputs):
-            buffer.set_arg(i, memoryview(a))
-        for i, r in enumerate(self.outputs):
-            buffer.set_res(i, memoryview(r))
-        self._buffer = buffer  # kept alive with the arrays it points to
-        self.sparsity = [fn.sparsity_out(i) for i in range(fn.n_out())]
-
-    def __call__(self) -> list[np.ndarray]:
-        self._trigger()
-        return self.outputs
-
-    def scatter(self, i: int) -> Callable[[np.ndarray, np.ndarray], None]:
-        """A function writing output ``i``'s nonzeros into a dense array (zeros elsewhere)."""
-        sp = self.sparsity[i]
-        rows, cols = sp.get_triplet()
-        flat = np.asarray(rows, dtype=np.intp) * sp.size2() + np.asarray(cols, dtype=np.intp)
-
-        def write(nonzeros: np.ndarray, dense: np.ndarray) -> None:
-            dense.ravel()[flat] = nonzeros
-
-        return write
+from ..buffered import Buffered
 
 
 class Oracle:
@@ -59,11 +28,11 @@ class Oracle:
         self._sigma = np.ones(1)
         self._lam = np.zeros(self.m)
         xp = [self._x, self._p]
-        self._f = _Buffered(solver.get_function("nlp_f"), xp)
-        self._g = _Buffered(g_fn, xp)
-        self._grad = _Buffered(grad_f, xp)
-        self._jac = _Buffered(solver.get_function("nlp_jac_g"), xp)
-        self._hess = _Buffered(solver.get_function("nlp_hess_l"), [*xp, self._sigma, self._lam])
+        self._f = Buffered(solver.get_function("nlp_f"), xp)
+        self._g = Buffered(g_fn, xp)
+        self._grad = Buffered(grad_f, xp)
+        self._jac = Buffered(solver.get_function("nlp_jac_g"), xp)
+        self._hess = Buffered(solver.get_function("nlp_hess_l"), [*xp, self._sigma, self._lam])
         self._dense = {
             "g": (self._g.scatter(0), np.zeros(self.m)),
             "grad": (self._grad.scatter(1), np.zeros(self.n)),
