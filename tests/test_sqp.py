@@ -21,6 +21,7 @@ from posturegen.solver.qp import proxsuite_backend, registry
 from posturegen.solver.qp.base import QP, QPSolution
 from posturegen.solver.qp.proxsuite_backend import ProxsuiteBackend
 from posturegen.solver.runs import variable_scales
+from posturegen.solver.sqp import core
 from posturegen.solver.sqp.core import (
     LINEAR_TOL,
     Bounds,
@@ -31,7 +32,7 @@ from posturegen.solver.sqp.core import (
     _reachable,
     sqp,
 )
-from posturegen.solver.sqp.hessian import CURVATURE_MAX, DELTA, convexified
+from posturegen.solver.sqp.hessian import AUGMENT, CURVATURE_MAX, DELTA, convexified
 from posturegen.solver.sqp.oracle import Oracle
 
 
@@ -161,16 +162,77 @@ def test_convexified_lifts_semidefinite_and_clips_negative_curvature():
     M = rng.normal(size=(6, 6))
     H = np.zeros((10, 10))
     H[:6, :6] = M @ M.T + np.eye(6)  # positive on the first block, zero on the "forces"
-    Bs, modified = convexified(H, scale)
+    none = np.zeros((0, 10))  # no row or bound held
+    Bs, modified, _ = convexified(H, scale, none)
     assert not modified
     S = np.outer(scale, scale)
     np.testing.assert_allclose(Bs, H * S + DELTA * np.eye(10), rtol=1e-12, atol=1e-15)
     H[0, 0] = -50.0  # negative curvature
-    Bs, modified = convexified(H, scale)
+    Bs, modified, _ = convexified(H, scale, none)
     assert modified
     w, V = np.linalg.eigh(H * S)
     assert np.linalg.eigvalsh(Bs).min() >= DELTA * (1 - 1e-9)
     np.testing.assert_allclose(Bs @ V, V * np.maximum(w, DELTA), atol=1e-8)
+
+
+def _indefinite_with_held_rows(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """H (8, 8) with one negative eigenvalue along a direction that rows A (2, 8) hold: H
+    positive definite on A's null space."""
+    A = rng.normal(size=(2, 8))
+    M = rng.normal(size=(8, 8))
+    H = M @ M.T + np.eye(8) - 60.0 * np.outer(A[0], A[0]) / (A[0] @ A[0])
+    assert np.linalg.eigvalsh(H).min() < 0
+    return H, A
+
+
+def test_convexified_keeps_the_curvature_on_the_null_space_of_the_rows_held():
+    """With rows held (their gradients in the scaled variables), B̃ = S H S + δ I + τ ÂᵀÂ for
+    the smallest τ of AUGMENT that makes it positive definite: equal to S H S + δ I on their
+    null space, and gain = τ / ‖row‖²; a direction the rows do not hold gets clipped."""
+    rng = np.random.default_rng(8)
+    H, A = _indefinite_with_held_rows(rng)
+    scale = np.ones(8)
+    Bs, modified, gain = convexified(H, scale, 3.0 * A)  # the rows' norms do not matter
+    assert modified
+    assert np.linalg.eigvalsh(Bs).min() >= 0.5 * DELTA
+    Z = np.linalg.svd(A)[2][2:].T  # (8, 6) the rows' null space
+    np.testing.assert_allclose(Z.T @ Bs @ Z, Z.T @ (H + DELTA * np.eye(8)) @ Z, atol=1e-9)
+    tau = gain * np.sum((3.0 * A) ** 2, axis=1)
+    weight = tau[0] / max(1.0, np.abs(H).max())
+    assert tau[1] == pytest.approx(tau[0]) and any(weight == pytest.approx(w) for w in AUGMENT)
+    smaller = [w for w in AUGMENT if w * max(1.0, np.abs(H).max()) < tau[0]]
+    for w in smaller:  # a smaller weight would not have made it positive definite
+        unit = A / np.linalg.norm(A, axis=1)[:, None]
+        B = H + DELTA * np.eye(8) + w * max(1.0, np.abs(H).max()) * unit.T @ unit
+        assert np.linalg.eigvalsh(B - 0.5 * DELTA * np.eye(8)).min() < 0
+    H_free = H - 60.0 * np.eye(8)  # negative on the null space too: clipped instead
+    Bs, modified, gain = convexified(H_free, scale, A)
+    assert modified and not gain.any()
+    w, V = np.linalg.eigh(H_free)
+    np.testing.assert_allclose(Bs @ V, V * np.maximum(w, DELTA), atol=1e-8)
+
+
+def test_a_qp_on_the_convexified_hessian_gives_newtons_step_and_the_programs_multipliers():
+    """An equality-constrained QP whose H is indefinite but positive on the rows' null space:
+    solved on B̃ (rows held), its step is the one of H itself (lifted by δ), and its
+    multipliers corrected by gain·(A d) satisfy (H + δ I) d + c + Aᵀλ = 0."""
+    rng = np.random.default_rng(9)
+    H, A = _indefinite_with_held_rows(rng)
+    c, b = rng.normal(size=8), rng.normal(size=2)
+    Bs, _, gain = convexified(H, np.ones(8), A)
+    box = np.full(8, 1e3)
+    qp = QP(Bs, c, A, -box, box, b, b.copy(), np.ones(2, dtype=bool))
+    sol = registry.solve(qp)
+    assert sol.solved
+    H = H + DELTA * np.eye(8)
+    kkt = np.block([[H, A.T], [A, np.zeros((2, 2))]])
+    newton = np.linalg.solve(kkt, np.concatenate([-c, b]))
+    np.testing.assert_allclose(sol.d, newton[:8], atol=1e-7)
+    it = _Iterate(np.zeros(8), 0.0, c, np.zeros(2), A)
+    model = core._Model(Bs, c, A, gain, np.zeros(8))
+    fixed = core._corrected(sol, it, model, qp.equal)
+    np.testing.assert_allclose(H @ sol.d + c + A.T @ fixed.lam_rows, 0.0, atol=1e-6)
+    np.testing.assert_allclose(fixed.lam_rows, newton[8:], atol=1e-6)
 
 
 def test_convexified_caps_runaway_curvature():
@@ -180,7 +242,7 @@ def test_convexified_caps_runaway_curvature():
     Q, _ = np.linalg.qr(rng.normal(size=(8, 8)))
     w = np.array([1e10, 3e4, 50.0, 2.0, 1.0, 0.5, 0.1, 0.01])
     H = (Q * w) @ Q.T
-    Bs, modified = convexified(H, np.ones(8))
+    Bs, modified, _ = convexified(H, np.ones(8), np.zeros((0, 8)))
     assert modified
     np.testing.assert_allclose(Bs @ Q, Q * np.minimum(w, CURVATURE_MAX), rtol=1e-6, atol=1e-3)
 

@@ -133,9 +133,9 @@ def sqp(
     run, it = _first(oracle, x0, bounds, lam_g0, lam_x0, duals0)
     lam_g, lam_x = run.lam_g, run.lam_x
     radius, penalty = options.radius, options.penalty
-    # (B̃, c̃, Ã) of the iterate in the scaled variables: the same arrays for each of its QPs
+    # the iterate's QP model in the scaled variables: the same arrays for each of its QPs
     # (the QP backend keeps its factorization for them)
-    scaled: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    scaled: _Model | None = None
     stall = _Stall(float(np.sum(bounds.violation(it.g))))
     for _ in range(options.max_iter):
         run.rows_bound |= bounds.violation(it.g) > 0
@@ -144,10 +144,10 @@ def sqp(
             run.status = stop
             break
         if scaled is None:
-            scaled = _model(oracle, it, lam_g, bounds, run)
+            scaled = _model(oracle, it, lam_g, lam_x, bounds, run)
         run.iterations += 1
         qp = _qp(it, scaled, bounds, radius, run.duals)
-        sol, penalty = _step(qp, it, bounds, penalty, options, run)
+        sol, penalty = _step(qp, it, bounds, penalty, options, run, scaled)
         if not sol.solved:
             run.status = "Error_In_Step_Computation"
             break
@@ -181,13 +181,43 @@ def sqp(
     return run
 
 
+@dataclass(frozen=True)
+class _Model:
+    """The QP's model at an iterate, in the scaled variables d̃ = d / s: B̃ = S B S, c̃ = S ∇f,
+    Ã = J S, and B̃'s weights along the rows and bounds it holds (hessian.convexified):
+    where those hold at the QP's solution, its multipliers λ' are the program's
+    λ = λ' + gain·(J d) (rows) and λ' + gain_x·d (bounds)."""
+
+    B: np.ndarray  # (n, n)
+    c: np.ndarray  # (n,)
+    A: np.ndarray  # (m, n)
+    gain: np.ndarray  # (m,) [multiplier / row unit]
+    gain_x: np.ndarray  # (n,) [multiplier / variable unit]
+
+
 def _model(
-    oracle: Oracle, it: _Iterate, lam_g: np.ndarray, bounds: Bounds, run: SQPRun
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(B̃, c̃, Ã) at ``it`` in the scaled variables: ∇²L made positive definite, ∇f and J."""
-    Bs, modified = convexified(oracle.hessian(it.x, 1.0, lam_g), bounds.scale)
+    oracle: Oracle,
+    it: _Iterate,
+    lam_g: np.ndarray,
+    lam_x: np.ndarray,
+    bounds: Bounds,
+    run: SQPRun,
+) -> _Model:
+    """The QP's model at ``it`` in the scaled variables: ∇²L made positive definite (first
+    on the null space of the rows and bounds that hold: the equality rows and those with a
+    multiplier), ∇f and J."""
+    As = it.J * bounds.scale
+    rows = (bounds.lbg == bounds.ubg) | (lam_g != 0)  # (m,)
+    held_x = lam_x != 0  # (n,) the variables at a bound of their own
+    unit = np.eye(len(held_x))[held_x]
+    Bs, modified, gain = convexified(
+        oracle.hessian(it.x, 1.0, lam_g), bounds.scale, np.vstack([As[rows], unit])
+    )
     run.modified_hessians += modified
-    return Bs, it.grad * bounds.scale, it.J * bounds.scale
+    gains, gains_x = np.zeros(len(rows)), np.zeros(len(held_x))
+    gains[rows] = gain[: rows.sum()]
+    gains_x[held_x] = gain[rows.sum() :] / bounds.scale[held_x] ** 2
+    return _Model(Bs, it.grad * bounds.scale, As, gains, gains_x)
 
 
 def _stop(
@@ -233,9 +263,10 @@ def _step(
     penalty: float,
     options: SQPOptions,
     run: SQPRun,
+    model: _Model,
 ) -> tuple[QPSolution, float]:
     """The QP's step (relaxed when its rows cannot hold in the region, elastic as the last
-    resort) and the penalty it needs."""
+    resort) and the penalty it needs; its multipliers the program's (_Model)."""
     sol = _relaxed(qp, options, run)
     if sol.solved:
         sol = _unscaled(sol, bounds.scale)
@@ -246,8 +277,20 @@ def _step(
         sol = _unscaled(sol, bounds.scale)
     run.qp_iterations += sol.iterations
     if sol.solved:
+        sol = _corrected(sol, it, model, qp.equal)
         run.rows_bound |= sol.lam_rows != 0
     return sol, penalty
+
+
+def _corrected(sol: QPSolution, it: _Iterate, model: _Model, equal: np.ndarray) -> QPSolution:
+    """The multipliers of a QP solved on B̃ with its weights along rows and bounds: the
+    program's where those hold at the solution (a multiplier of their own)."""
+    rows, held_x = (sol.lam_rows != 0) | equal, sol.lam_bounds != 0
+    return dataclasses.replace(
+        sol,
+        lam_rows=sol.lam_rows + np.where(rows, model.gain * (it.J @ sol.d), 0.0),
+        lam_bounds=sol.lam_bounds + np.where(held_x, model.gain_x * sol.d, 0.0),
+    )
 
 
 def _max_abs(v: np.ndarray) -> float:
@@ -273,20 +316,19 @@ def _converged(
 
 def _qp(
     it: _Iterate,
-    scaled: tuple[np.ndarray, np.ndarray, np.ndarray],
+    scaled: _Model,
     bounds: Bounds,
     radius: float,
     duals: np.ndarray | None,
 ) -> QP:
     """The QP at ``it`` in the region of ``radius``, in the scaled variables d̃ = d / s:
-    ``scaled`` = (B̃ = S B S, c̃ = S ∇f, Ã = J S), the bounds divided by s (the rows' are
+    ``scaled`` (B̃ = S B S, c̃ = S ∇f, Ã = J S), the bounds divided by s (the rows' are
     unchanged)."""
     s = bounds.scale
-    Bs, cs, As = scaled
     return QP(
-        B=Bs,
-        c=cs,
-        A=As,
+        B=scaled.B,
+        c=scaled.c,
+        A=scaled.A,
         lb=np.maximum((bounds.lbx - it.x) / s, -radius),
         ub=np.minimum((bounds.ubx - it.x) / s, radius),
         lbA=bounds.lbg - it.g,

@@ -25,22 +25,55 @@ DELTA = 1e-4  # the smallest eigenvalue in scaled variables
 CURVATURE_MAX = 1e8
 
 
-def convexified(H: np.ndarray, scale: np.ndarray, delta: float = DELTA) -> tuple[np.ndarray, bool]:
-    """(B̃, modified): the Hessian in the scaled variables d̃ = d / s made positive definite,
-    B̃ = S H S + δ I when S H S + δ/2 I is positive definite (S = diag(scale): where S H S is
-    positive semi-definite, its smallest eigenvalue lifted to δ), else V clip(Λ, δ,
-    CURVATURE_MAX) Vᵀ with S H S = V Λ Vᵀ (also when an entry of S H S exceeds the cap).
-    B̃'s eigenvalues are at least δ/2: the QP is solved in these variables (in metres and
-    newtons, the forces' δ / weight² made a Talos QP's condition number 6e12)."""
+# the weights τ tried along the rows and bounds that hold, each × max(1, max |S H S|):
+# B̃ = S H S + δ I + τ Âᵀ Â (Â: their gradients in the scaled variables, each of norm 1). On
+# their null space B̃ is S H S + δ I: while they hold, the QP's step is Newton's wherever ∇²L
+# is positive there (clipped eigenvalues bent it, and the runs converged linearly: a reach's
+# last 20 iterations each did 61 % of what its model promised, its ∇²L negative along a
+# direction that a row held)
+AUGMENT = (1e-4, 1e-3, 1e-2, 0.1, 1.0, 10.0, 100.0)
+
+
+def _positive(B: np.ndarray, delta: float) -> bool:
+    """Whether B - δ/2 I is positive definite, B's entries within CURVATURE_MAX."""
+    if np.abs(B).max() > CURVATURE_MAX:
+        return False
+    try:
+        np.linalg.cholesky(B - 0.5 * delta * np.eye(B.shape[0]))
+    except np.linalg.LinAlgError:
+        return False
+    return True
+
+
+def convexified(
+    H: np.ndarray, scale: np.ndarray, held: np.ndarray, delta: float = DELTA
+) -> tuple[np.ndarray, bool, np.ndarray]:
+    """(B̃, modified, gain): the Hessian in the scaled variables d̃ = d / s made positive
+    definite. B̃ = S H S + δ I when that is (S = diag(scale): where S H S is positive
+    semi-definite, its smallest eigenvalue lifted to δ); else S H S + δ I + τ Âᵀ Â for the
+    first τ of AUGMENT that makes it so (Â: ``held`` (k, n), the gradients of the rows and
+    bounds that hold in the scaled variables, normalized); a QP's multiplier of held row i
+    is then off by gain_i (held_i · d̃) where it holds, gain_i = τ / ‖held_i‖² (k,); else
+    V clip(Λ, δ, CURVATURE_MAX) Vᵀ with S H S = V Λ Vᵀ. B̃'s eigenvalues are at least δ/2:
+    the QP is solved in these variables (in metres and newtons, the forces' δ / weight² made
+    a Talos QP's condition number 6e12)."""
     Hs = H * np.outer(scale, scale)
+    gain = np.zeros(len(held))
     # δ on the diagonal alone where the curvature is only missing (the forces enter
     # linearly: their block is zero), not negative
     lifted = Hs + delta * np.eye(H.shape[0])
-    if np.abs(lifted).max() <= CURVATURE_MAX:
-        try:
-            np.linalg.cholesky(lifted - 0.5 * delta * np.eye(H.shape[0]))
-            return lifted, False
-        except np.linalg.LinAlgError:
-            pass
+    if _positive(lifted, delta):
+        return lifted, False, gain
+    norms = np.linalg.norm(held, axis=1)
+    rows = norms > 0
+    if rows.any():
+        unit = held[rows] / norms[rows, None]
+        G = unit.T @ unit
+        base = max(1.0, float(np.abs(Hs).max()))
+        for weight in AUGMENT:
+            B = lifted + (weight * base) * G
+            if _positive(B, delta):
+                gain[rows] = weight * base / norms[rows] ** 2
+                return B, True, gain
     w, V = np.linalg.eigh(Hs)
-    return (V * np.clip(w, delta, CURVATURE_MAX)) @ V.T, True
+    return (V * np.clip(w, delta, CURVATURE_MAX)) @ V.T, True, gain
