@@ -188,51 +188,81 @@ def _indefinite_with_held_rows(rng: np.random.Generator) -> tuple[np.ndarray, np
 def test_convexified_keeps_the_curvature_on_the_null_space_of_the_rows_held():
     """With rows held (their gradients in the scaled variables), B̃ = S H S + δ I + τ ÂᵀÂ for
     the smallest τ of AUGMENT that makes it positive definite: equal to S H S + δ I on their
-    null space, and gain = τ / ‖row‖²; a direction the rows do not hold gets clipped."""
+    null space, and C d̃ = τ (Â d̃) / ‖row‖; a direction the rows do not hold gets clipped."""
     rng = np.random.default_rng(8)
     H, A = _indefinite_with_held_rows(rng)
     scale = np.ones(8)
-    Bs, modified, gain = convexified(H, scale, 3.0 * A)  # the rows' norms do not matter
+    held = 3.0 * A  # the rows' norms do not matter
+    Bs, modified, C = convexified(H, scale, held)
     assert modified
     assert np.linalg.eigvalsh(Bs).min() >= 0.5 * DELTA
     Z = np.linalg.svd(A)[2][2:].T  # (8, 6) the rows' null space
     np.testing.assert_allclose(Z.T @ Bs @ Z, Z.T @ (H + DELTA * np.eye(8)) @ Z, atol=1e-9)
-    tau = gain * np.sum((3.0 * A) ** 2, axis=1)
+    np.testing.assert_allclose(held.T @ C, Bs - H - DELTA * np.eye(8), atol=1e-8)
+    tau = np.sum(C * held, axis=1)  # τ of each row
     weight = tau[0] / max(1.0, np.abs(H).max())
     assert tau[1] == pytest.approx(tau[0]) and any(weight == pytest.approx(w) for w in AUGMENT)
-    smaller = [w for w in AUGMENT if w * max(1.0, np.abs(H).max()) < tau[0]]
-    for w in smaller:  # a smaller weight would not have made it positive definite
-        unit = A / np.linalg.norm(A, axis=1)[:, None]
+    unit = A / np.linalg.norm(A, axis=1)[:, None]
+    for w in [w for w in AUGMENT if w < weight * (1 - 1e-9)]:  # a smaller one would not do
         B = H + DELTA * np.eye(8) + w * max(1.0, np.abs(H).max()) * unit.T @ unit
         assert np.linalg.eigvalsh(B - 0.5 * DELTA * np.eye(8)).min() < 0
     H_free = H - 60.0 * np.eye(8)  # negative on the null space too: clipped instead
-    Bs, modified, gain = convexified(H_free, scale, A)
-    assert modified and not gain.any()
+    Bs, modified, C = convexified(H_free, scale, A)
+    assert modified and not C.any()
     w, V = np.linalg.eigh(H_free)
     np.testing.assert_allclose(Bs @ V, V * np.maximum(w, DELTA), atol=1e-8)
 
 
-def test_a_qp_on_the_convexified_hessian_gives_newtons_step_and_the_programs_multipliers():
-    """An equality-constrained QP whose H is indefinite but positive on the rows' null space:
-    solved on B̃ (rows held), its step is the one of H itself (lifted by δ), and its
-    multipliers corrected by gain·(A d) satisfy (H + δ I) d + c + Aᵀλ = 0."""
-    rng = np.random.default_rng(9)
-    H, A = _indefinite_with_held_rows(rng)
-    c, b = rng.normal(size=8), rng.normal(size=2)
-    Bs, _, gain = convexified(H, np.ones(8), A)
-    box = np.full(8, 1e3)
+def _coupled(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """H (6, 6) positive definite on the null space of rows A (2, 6), negative on their span
+    and coupled to the null space so strongly (1e3) that only τ ≈ 1e6 would make
+    H + τ ÂᵀÂ positive, beyond AUGMENT's largest (100 max |H|)."""
+    Q, _ = np.linalg.qr(rng.normal(size=(6, 6)))
+    Y, Z = Q[:, :2], Q[:, 2:]
+    K = 1e3 * rng.uniform(0.5, 1.0, size=(2, 4))
+    H = -Y @ Y.T + Z @ Z.T + Y @ K @ Z.T + Z @ K.T @ Y.T
+    A = rng.normal(size=(2, 2)) @ Y.T  # rows spanning Y
+    return H, A
+
+
+def test_convexified_keeps_the_null_space_when_no_weight_is_enough():
+    """Where no τ of AUGMENT makes S H S + δ I + τ ÂᵀÂ positive (strong coupling) but S H S is
+    positive on the rows' null space: B̃ keeps S H S + δ I there, clips it on the rows' span
+    and drops the coupling; C by least squares: heldᵀ C d̃ = (B̃ - S H S - δ I) d̃ for every
+    d̃ that keeps the rows (on their null space)."""
+    H, A = _coupled(np.random.default_rng(10))
+    Bs, modified, C = convexified(H, np.ones(6), A)
+    assert modified
+    assert np.linalg.eigvalsh(Bs).min() >= 0.5 * DELTA
+    Z = np.linalg.svd(A)[2][2:].T
+    lifted = H + DELTA * np.eye(6)
+    np.testing.assert_allclose(Z.T @ Bs @ Z, Z.T @ lifted @ Z, atol=1e-8)
+    np.testing.assert_allclose(Bs @ Z, Z @ (Z.T @ lifted @ Z), atol=1e-8)  # no coupling
+    np.testing.assert_allclose(A.T @ C @ Z, (Bs - lifted) @ Z, atol=1e-6)
+
+
+@pytest.mark.parametrize("make", [_indefinite_with_held_rows, _coupled])
+def test_a_qp_on_the_convexified_hessian_gives_newtons_step_and_the_programs_multipliers(make):
+    """An equality-constrained QP (rows holding at d = 0) whose H is indefinite but positive
+    on the rows' null space: solved on B̃ (rows held), its step is the one of H itself
+    (lifted by δ), and its multipliers corrected by C d̃ satisfy (H + δ I) d + c + Aᵀλ = 0."""
+    H, A = make(np.random.default_rng(9))
+    n = H.shape[0]
+    c = np.random.default_rng(11).normal(size=n)
+    Bs, _, C = convexified(H, np.ones(n), A)
+    box, b = np.full(n, 1e3), np.zeros(2)
     qp = QP(Bs, c, A, -box, box, b, b.copy(), np.ones(2, dtype=bool))
     sol = registry.solve(qp)
     assert sol.solved
-    H = H + DELTA * np.eye(8)
+    H = H + DELTA * np.eye(n)
     kkt = np.block([[H, A.T], [A, np.zeros((2, 2))]])
     newton = np.linalg.solve(kkt, np.concatenate([-c, b]))
-    np.testing.assert_allclose(sol.d, newton[:8], atol=1e-7)
-    it = _Iterate(np.zeros(8), 0.0, c, np.zeros(2), A)
-    model = core._Model(Bs, c, A, gain, np.zeros(8))
-    fixed = core._corrected(sol, it, model, qp.equal)
-    np.testing.assert_allclose(H @ sol.d + c + A.T @ fixed.lam_rows, 0.0, atol=1e-6)
-    np.testing.assert_allclose(fixed.lam_rows, newton[8:], atol=1e-6)
+    np.testing.assert_allclose(sol.d, newton[:n], rtol=1e-6, atol=1e-8)
+    model = core._Model(Bs, c, A, np.ones(2, dtype=bool), np.zeros(n, dtype=bool), C)
+    fixed = core._corrected(sol, model, qp.equal, np.ones(n))
+    size = max(1.0, float(np.abs(fixed.lam_rows).max()))
+    np.testing.assert_allclose(H @ sol.d + c + A.T @ fixed.lam_rows, 0.0, atol=1e-6 * size)
+    np.testing.assert_allclose(fixed.lam_rows, newton[n:], rtol=1e-6, atol=1e-6)
 
 
 def test_convexified_caps_runaway_curvature():
@@ -275,10 +305,6 @@ class _Permuted:
     def __init__(self, oracle: Oracle, order: np.ndarray) -> None:
         self.oracle, self.order = oracle, order
         self.n, self.m = oracle.n, oracle.m
-
-    def value(self, x):
-        f, g = self.oracle.value(x)
-        return f, g[self.order]
 
     def first_order(self, x):
         f, grad, g, J = self.oracle.first_order(x)

@@ -184,15 +184,15 @@ def sqp(
 @dataclass(frozen=True)
 class _Model:
     """The QP's model at an iterate, in the scaled variables d̃ = d / s: B̃ = S B S, c̃ = S ∇f,
-    Ã = J S, and B̃'s weights along the rows and bounds it holds (hessian.convexified):
-    where those hold at the QP's solution, its multipliers λ' are the program's
-    λ = λ' + gain·(J d) (rows) and λ' + gain_x·d (bounds)."""
+    Ã = J S, and the rows and bounds that B̃ holds (hessian.convexified): where those hold at
+    the QP's solution, its multipliers λ' are the program's λ' + C d̃ (rows, then bounds)."""
 
     B: np.ndarray  # (n, n)
     c: np.ndarray  # (n,)
     A: np.ndarray  # (m, n)
-    gain: np.ndarray  # (m,) [multiplier / row unit]
-    gain_x: np.ndarray  # (n,) [multiplier / variable unit]
+    rows: np.ndarray  # (m,) bool: the rows held
+    held_x: np.ndarray  # (n,) bool: the bounds held
+    C: np.ndarray  # (rows + bounds held, n)
 
 
 def _model(
@@ -210,14 +210,11 @@ def _model(
     rows = (bounds.lbg == bounds.ubg) | (lam_g != 0)  # (m,)
     held_x = lam_x != 0  # (n,) the variables at a bound of their own
     unit = np.eye(len(held_x))[held_x]
-    Bs, modified, gain = convexified(
+    Bs, modified, C = convexified(
         oracle.hessian(it.x, 1.0, lam_g), bounds.scale, np.vstack([As[rows], unit])
     )
     run.modified_hessians += modified
-    gains, gains_x = np.zeros(len(rows)), np.zeros(len(held_x))
-    gains[rows] = gain[: rows.sum()]
-    gains_x[held_x] = gain[rows.sum() :] / bounds.scale[held_x] ** 2
-    return _Model(Bs, it.grad * bounds.scale, As, gains, gains_x)
+    return _Model(Bs, it.grad * bounds.scale, As, rows, held_x, C)
 
 
 def _stop(
@@ -253,7 +250,7 @@ def _first(
     lam_x = np.zeros(oracle.n) if lam_x0 is None else np.array(lam_x0, dtype=float)
     run = SQPRun(x, 0.0, lam_g, lam_x, "Maximum_Iterations_Exceeded", 0, 0, duals0, 0.0)
     run.rows_bound = np.zeros(oracle.m, dtype=bool)
-    return run, _Iterate(x, *oracle.first_order(x))
+    return run, _at(oracle, x)
 
 
 def _step(
@@ -277,20 +274,25 @@ def _step(
         sol = _unscaled(sol, bounds.scale)
     run.qp_iterations += sol.iterations
     if sol.solved:
-        sol = _corrected(sol, it, model, qp.equal)
+        sol = _corrected(sol, model, qp.equal, bounds.scale)
         run.rows_bound |= sol.lam_rows != 0
     return sol, penalty
 
 
-def _corrected(sol: QPSolution, it: _Iterate, model: _Model, equal: np.ndarray) -> QPSolution:
-    """The multipliers of a QP solved on B̃ with its weights along rows and bounds: the
-    program's where those hold at the solution (a multiplier of their own)."""
-    rows, held_x = (sol.lam_rows != 0) | equal, sol.lam_bounds != 0
-    return dataclasses.replace(
-        sol,
-        lam_rows=sol.lam_rows + np.where(rows, model.gain * (it.J @ sol.d), 0.0),
-        lam_bounds=sol.lam_bounds + np.where(held_x, model.gain_x * sol.d, 0.0),
-    )
+def _corrected(sol: QPSolution, model: _Model, equal: np.ndarray, scale: np.ndarray) -> QPSolution:
+    """The multipliers of a QP solved on B̃ (its solution in the variables' units): the
+    program's, λ' + C d̃, where the rows and bounds that B̃ holds hold at the solution (an
+    equality, or a multiplier of their own)."""
+    if not model.C.any():
+        return sol
+    extra = model.C @ (sol.d / scale)  # (k,) in the scaled QP's units
+    k = int(model.rows.sum())
+    lam_rows, lam_bounds = sol.lam_rows.copy(), sol.lam_bounds.copy()
+    active = (lam_rows[model.rows] != 0) | equal[model.rows]
+    lam_rows[model.rows] += np.where(active, extra[:k], 0.0)
+    at_bound = lam_bounds[model.held_x] != 0
+    lam_bounds[model.held_x] += np.where(at_bound, extra[k:] / scale[model.held_x], 0.0)
+    return dataclasses.replace(sol, lam_rows=lam_rows, lam_bounds=lam_bounds)
 
 
 def _max_abs(v: np.ndarray) -> float:
@@ -459,12 +461,13 @@ def _try_step(
     merit0 = it.f + penalty * float(np.sum(bounds.violation(it.g)))
     if pred <= 1e-16 * max(1.0, abs(merit0)):
         return None
-    x1 = np.clip(it.x + sol.d, bounds.lbx, bounds.ubx)
-    f1, g1 = oracle.value(x1)
-    ratio = (merit0 - f1 - penalty * float(np.sum(bounds.violation(g1)))) / pred
+    # the trial point's first-order values at once: an accepted step (most of them) is the
+    # next iterate without evaluating f and g twice
+    trial = _at(oracle, np.clip(it.x + sol.d, bounds.lbx, bounds.ubx))
+    ratio = (merit0 - trial.f - penalty * float(np.sum(bounds.violation(trial.g)))) / pred
     if not ratio >= ETA:  # NaN (f or g not finite at the trial point): rejected
         # second-order correction: the rows shifted by their curvature along d
-        shift = g1 - it.g - it.J @ sol.d
+        shift = trial.g - it.g - it.J @ sol.d
         soc = QP(
             qp.B, qp.c, qp.A, qp.lb, qp.ub, qp.lbA - shift, qp.ubA - shift, qp.equal, sol.duals
         )
@@ -472,12 +475,16 @@ def _try_step(
         if not corrected.solved:
             return None
         corrected = _unscaled(corrected, bounds.scale)
-        x1 = np.clip(it.x + corrected.d, bounds.lbx, bounds.ubx)
-        f1, g1 = oracle.value(x1)
-        ratio = (merit0 - f1 - penalty * float(np.sum(bounds.violation(g1)))) / pred
+        trial = _at(oracle, np.clip(it.x + corrected.d, bounds.lbx, bounds.ubx))
+        ratio = (merit0 - trial.f - penalty * float(np.sum(bounds.violation(trial.g)))) / pred
         if not ratio >= ETA:  # NaN (f or g not finite at the trial point): rejected
             return None
-    return _Iterate(x1, *oracle.first_order(x1)), ratio
+    return trial, ratio
+
+
+def _at(oracle: Oracle, x: np.ndarray) -> _Iterate:
+    """The iterate at x: f, ∇f, g and J."""
+    return _Iterate(x, *oracle.first_order(x))
 
 
 def _own_bound_multipliers(sol: QPSolution, qp: QP, it: _Iterate, bounds: Bounds) -> np.ndarray:

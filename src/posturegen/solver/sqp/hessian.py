@@ -48,22 +48,34 @@ def _positive(B: np.ndarray, delta: float) -> bool:
 def convexified(
     H: np.ndarray, scale: np.ndarray, held: np.ndarray, delta: float = DELTA
 ) -> tuple[np.ndarray, bool, np.ndarray]:
-    """(B̃, modified, gain): the Hessian in the scaled variables d̃ = d / s made positive
-    definite. B̃ = S H S + δ I when that is (S = diag(scale): where S H S is positive
-    semi-definite, its smallest eigenvalue lifted to δ); else S H S + δ I + τ Âᵀ Â for the
-    first τ of AUGMENT that makes it so (Â: ``held`` (k, n), the gradients of the rows and
-    bounds that hold in the scaled variables, normalized); a QP's multiplier of held row i
-    is then off by gain_i (held_i · d̃) where it holds, gain_i = τ / ‖held_i‖² (k,); else
-    V clip(Λ, δ, CURVATURE_MAX) Vᵀ with S H S = V Λ Vᵀ. B̃'s eigenvalues are at least δ/2:
-    the QP is solved in these variables (in metres and newtons, the forces' δ / weight² made
-    a Talos QP's condition number 6e12)."""
+    """(B̃, modified, C): the Hessian in the scaled variables d̃ = d / s made positive
+    definite, and C (k, n) with (B̃ - S H S - δ I) d̃ = heldᵀ (C d̃) where that has a solution:
+    a QP's multipliers of the ``held`` gradients (k, n) (the rows and bounds that hold, in
+    the scaled variables) become those of S H S + δ I by adding C d̃. In order:
+
+    - S H S + δ I when that is positive definite (S = diag(scale): where S H S is positive
+      semi-definite, its smallest eigenvalue lifted to δ); C = 0;
+    - S H S + δ I + τ ÂᵀÂ for the first τ of AUGMENT (× max(1, max |S H S|)) that makes it
+      so, Â the held gradients normalized: the same on their null space; C = τ Â / ‖held‖;
+    - where S H S + δ I is positive definite on the held gradients' null space (its
+      eigenvalues there >= δ): Z Zᵀ (S H S + δ I) Z Zᵀ + Y clip(Yᵀ (S H S + δ I) Y) Yᵀ (Y, Z
+      orthonormal bases of the held gradients' span and null space; clip: eigenvalues
+      within [δ, CURVATURE_MAX]), its coupling with the span dropped (HRP-2 on a ladder:
+      ∇²L positive on the null space of 71 held rows, but only τ ≈ 1e8 made the sum
+      positive, a condition number of 1e11; clipped instead, its SQP crawled 400
+      iterations at 1e-4 a step); C by least squares;
+    - V clip(Λ, δ, CURVATURE_MAX) Vᵀ with S H S = V Λ Vᵀ; C = 0.
+
+    B̃'s eigenvalues are at least δ/2: the QP is solved in these variables (in metres and
+    newtons, the forces' δ / weight² made a Talos QP's condition number 6e12)."""
     Hs = H * np.outer(scale, scale)
-    gain = np.zeros(len(held))
+    n = H.shape[0]
+    none = np.zeros((len(held), n))
     # δ on the diagonal alone where the curvature is only missing (the forces enter
     # linearly: their block is zero), not negative
-    lifted = Hs + delta * np.eye(H.shape[0])
+    lifted = Hs + delta * np.eye(n)
     if _positive(lifted, delta):
-        return lifted, False, gain
+        return lifted, False, none
     norms = np.linalg.norm(held, axis=1)
     rows = norms > 0
     if rows.any():
@@ -73,7 +85,37 @@ def convexified(
         for weight in AUGMENT:
             B = lifted + (weight * base) * G
             if _positive(B, delta):
-                gain[rows] = weight * base / norms[rows] ** 2
-                return B, True, gain
+                C = none.copy()
+                C[rows] = (weight * base / norms[rows, None]) * unit
+                return B, True, C
+        blocks = _blocks(lifted, held, delta)
+        if blocks is not None:
+            return blocks[0], True, blocks[1]
     w, V = np.linalg.eigh(Hs)
-    return (V * np.clip(w, delta, CURVATURE_MAX)) @ V.T, True, gain
+    return (V * np.clip(w, delta, CURVATURE_MAX)) @ V.T, True, none
+
+
+def _clipped(M: np.ndarray, delta: float) -> np.ndarray:
+    """M with its eigenvalues clipped to [δ, CURVATURE_MAX]."""
+    w, V = np.linalg.eigh(M)
+    return (V * np.clip(w, delta, CURVATURE_MAX)) @ V.T
+
+
+def _blocks(
+    lifted: np.ndarray, held: np.ndarray, delta: float
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """(B̃, C) of S H S + δ I (``lifted``) kept on the held gradients' null space and clipped
+    on their span, the coupling dropped (see :func:`convexified`); None when they span
+    everything or S H S + δ I is not positive definite on their null space."""
+    _, sv, Vt = np.linalg.svd(held)
+    rank = int(np.sum(sv > 1e-10 * sv[0]))
+    if rank >= lifted.shape[0]:
+        return None
+    Y, Z = Vt[:rank].T, Vt[rank:].T
+    reduced = Z.T @ lifted @ Z
+    if np.linalg.eigvalsh(reduced)[0] < delta:
+        return None
+    B = Z @ reduced @ Z.T + Y @ _clipped(Y.T @ lifted @ Y, delta) @ Y.T
+    B = 0.5 * (B + B.T)
+    C = np.linalg.lstsq(held.T, B - lifted, rcond=None)[0]  # heldᵀ C ≈ B̃ - S H S - δ I
+    return B, C

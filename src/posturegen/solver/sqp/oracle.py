@@ -52,13 +52,6 @@ class Oracle:
         write(nonzeros, out)
         return out.copy()
 
-    def value(self, x: np.ndarray) -> tuple[float, np.ndarray]:
-        """f(x) and g(x) (m,)."""
-        self._x[:] = x
-        self.evaluations += 2
-        f = float(self._f()[0][0])
-        return f, self._dense_of("g", self._g()[0])
-
     def first_order(self, x: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
         """f, ∇f (n,), g (m,) and J (m, n) at x."""
         self._x[:] = x
