@@ -30,6 +30,8 @@ from posturegen.solver.sqp.core import (
     _Iterate,
     _model_reduction,
     _reachable,
+    _relaxed,
+    _theta_max,
     sqp,
 )
 from posturegen.solver.sqp.hessian import AUGMENT, CURVATURE_MAX, DELTA, convexified
@@ -553,6 +555,39 @@ def test_rows_out_of_reach_of_the_region_cannot_be_why_a_qp_has_no_solution():
         np.zeros(3, dtype=bool),
     )
     np.testing.assert_array_equal(_reachable(qp), [False, True, True])
+
+
+@pytest.mark.parametrize("backend", ["daqp", "proxsuite"])
+def test_theta_max_is_the_largest_share_of_the_violations_the_region_allows(backend):
+    """Rows d₀ >= 1 and d₁ <= -0.5 violated at d = 0, an equality d₂ = 0.4 (violated), a row
+    d₀ - d₁ <= 0.1 that holds at d = 0, the region |d| <= 0.2. At θ the violated rows ask
+    d₀ >= θ, d₁ <= -θ/2, d₂ = 0.4 θ, so 1.5 θ <= d₀ - d₁ <= 0.1: θ = 1/15 (the region alone
+    allows 0.2, the equality 0.5). The relaxed step asks half of it and meets it."""
+    inf = np.inf
+    qp = QP(
+        np.eye(3),
+        np.zeros(3),
+        np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, -1.0, 0.0]]),
+        np.full(3, -0.2),
+        np.full(3, 0.2),
+        np.array([1.0, -inf, 0.4, -inf]),
+        np.array([inf, -0.5, 0.4, 0.1]),
+        np.array([False, False, True, False]),
+    )
+    options = SQPOptions(qp=backend)
+    assert registry.solve(qp, backend).status == "infeasible"
+    assert _theta_max(qp, options) == pytest.approx(1 / 15, abs=1e-7)
+    wider = dataclasses.replace(qp, ubA=np.array([inf, -0.5, 0.4, 10.0]))
+    assert _theta_max(wider, options) == pytest.approx(0.2, abs=1e-7)  # the region's
+    run = SQPRun(np.zeros(3), 0.0, np.zeros(4), np.zeros(3), "", 0, 0, None, 0.0)
+    run.rows_bound = np.zeros(4, dtype=bool)
+    sol = _relaxed(qp, options, run)
+    theta = 0.5 / 15
+    assert sol.solved
+    assert sol.d[0] >= theta - 1e-8 and sol.d[1] <= -theta / 2 + 1e-8
+    assert sol.d[2] == pytest.approx(0.4 * theta, abs=1e-8)
+    assert sol.d[0] - sol.d[1] <= 0.1 + 1e-8
+    assert run.relaxed_qps == 2  # the θ-max QP and the step's: no ladder
 
 
 def test_the_model_counts_no_linearized_residue_below_the_qps_tolerance():

@@ -1,15 +1,17 @@
 """daqp: a dual active-set QP solver for dense problems (Arnström, Bemporad, Axehill 2022),
 warm-started from the signs of the previous QP's multipliers (its working set).
 
-A workspace (``daqp.Model``) is kept per thread: a QP whose B, c and A are the arrays of the
-QP solved before it (the same objects: an SQP's relaxed, corrected and smaller-region QPs at
-one iterate) only updates its bounds, which skips B's factorization and the products with A
-(a QP of Talos' reach's size, 62 × 95: 28 µs instead of 124 µs)."""
+A workspace (``daqp.Model``) is kept per thread and QP shape: a QP whose B, c and A are the
+arrays of the QP of its shape solved before it (the same objects: an SQP's relaxed, corrected
+and smaller-region QPs at one iterate) only updates its bounds, which skips B's factorization
+and the products with A (a QP of Talos' reach's size, 62 × 95: 28 µs instead of 124 µs)."""
 
 from __future__ import annotations
 
 import dataclasses
 import threading
+from collections import OrderedDict
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -31,12 +33,32 @@ _EQUALITY, _ACTIVE, _LOWER = 5, 1, 2
 _INFEASIBLE = -1  # daqp's exit flag of a QP without a feasible point
 
 
-class _Workspace(threading.local):
-    """This thread's daqp workspace and the matrices it was set up with."""
+# workspaces kept per thread, one per QP shape (n, m): an SQP iterate's QPs share one, its
+# θ-max QP (one variable more, :mod:`posturegen.solver.sqp.core`) has its own, so that
+# neither sets the other's up again
+WORKSPACES = 4
+
+
+@dataclass
+class _Workspace:
+    """A daqp workspace and the matrices it was set up with."""
+
+    model: Any = None
+    matrices: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+
+class _Workspaces(threading.local):
+    """This thread's workspaces by QP shape, the WORKSPACES last used."""
 
     def __init__(self) -> None:
-        self.model: Any = None
-        self.matrices: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.by_shape: OrderedDict[tuple[int, int], _Workspace] = OrderedDict()
+
+    def get(self, shape: tuple[int, int]) -> _Workspace:
+        ws = self.by_shape.pop(shape, None) or _Workspace()
+        self.by_shape[shape] = ws
+        while len(self.by_shape) > WORKSPACES:
+            self.by_shape.popitem(last=False)
+        return ws
 
 
 class DaqpBackend:
@@ -45,7 +67,7 @@ class DaqpBackend:
     name = "daqp"
 
     def __init__(self) -> None:
-        self._workspace = _Workspace()
+        self._workspaces = _Workspaces()
 
     def available(self) -> bool:
         return importable("daqp")
@@ -65,7 +87,7 @@ class DaqpBackend:
         upper = np.concatenate([qp.ub, qp.ubA])
         lower = np.concatenate([qp.lb, qp.lbA])
         sense = _sense(qp, n)
-        ws = self._workspace
+        ws = self._workspaces.get(qp.A.shape)
         last = ws.matrices
         if last is not None and last[0] is qp.B and last[1] is qp.c and last[2] is qp.A:
             flag = ws.model.update(bupper=upper, blower=lower, sense=sense)
