@@ -27,6 +27,7 @@ from posturegen.solver.sqp.core import (
     Bounds,
     SQPOptions,
     SQPRun,
+    _Flat,
     _Iterate,
     _model_reduction,
     _reachable,
@@ -588,6 +589,26 @@ def test_theta_max_is_the_largest_share_of_the_violations_the_region_allows(back
     assert sol.d[2] == pytest.approx(0.4 * theta, abs=1e-8)
     assert sol.d[0] - sol.d[1] <= 0.1 + 1e-8
     assert run.relaxed_qps == 2  # the θ-max QP and the step's: no ladder
+
+
+def test_a_run_settles_after_feasible_iterates_whose_cost_no_longer_changes():
+    """_Flat: FLAT_ITERATIONS feasible iterates in a row whose cost moves by less than
+    FLAT_CHANGE × max(1, |f|) settle; an infeasible one starts the count again; a cost that
+    still falls by 1e-4 an iterate never settles."""
+    bounds = Bounds(np.zeros(1), np.ones(1), np.zeros(1), np.zeros(1), np.ones(1))
+    options = SQPOptions()
+
+    def at(f: float, g: float) -> _Iterate:
+        return _Iterate(np.zeros(1), f, np.zeros(1), np.array([g]), np.zeros((1, 1)))
+
+    flat = _Flat()
+    costs = 2.0 - 1e-8 * np.arange(3 * core.FLAT_ITERATIONS)
+    settled = [
+        flat.settled(at(f, 0.0 if i != 4 else 1e-3), bounds, options) for i, f in enumerate(costs)
+    ]
+    assert settled.index(True) == 4 + core.FLAT_ITERATIONS  # the count restarted after #4
+    falling = _Flat()
+    assert not any(falling.settled(at(2.0 - 1e-4 * i, 0.0), bounds, options) for i in range(50))
 
 
 def test_the_model_counts_no_linearized_residue_below_the_qps_tolerance():
