@@ -179,11 +179,7 @@ def sqp(
             break
         d_size = float(np.max(np.abs(sol.d) / bounds.scale, initial=0.0))
         if d_size < 1e-12:  # the QP stays where it is: its multipliers are the news
-            lam_g, lam_x = sol.lam_rows, _own_bound_multipliers(sol, qp, it, bounds)
-            if _converged(it, lam_g, lam_x, bounds, options):
-                run.status = SUCCEEDED
-            else:
-                run.status = _stalled(it, bounds, options)
+            lam_g, lam_x, run.status = _standing(sol, qp, it, bounds, options)
             break
         run.history.append((it.f, _max_abs(bounds.violation(it.g)), radius))
         step = _try_step(oracle, it, sol, qp, bounds, penalty, options)
@@ -203,8 +199,7 @@ def sqp(
         if ratio > 0.75 and d_size >= 0.99 * radius:
             radius = min(2.0 * radius, RADIUS_MAX)
     else:
-        if _converged(it, lam_g, lam_x, bounds, options):
-            run.status = SUCCEEDED
+        run.status = SUCCEEDED if _converged(it, lam_g, lam_x, bounds, options) else run.status
     run.x, run.f, run.lam_g, run.lam_x = it.x, it.f, lam_g, lam_x
     run.wall_s = time.perf_counter() - t0
     return run
@@ -566,6 +561,17 @@ def _own_bound_multipliers(sol: QPSolution, qp: QP, it: _Iterate, bounds: Bounds
     at_lower = (it.x <= bounds.lbx + 1e-12) & (sol.lam_bounds < 0)
     at_upper = (it.x >= bounds.ubx - 1e-12) & (sol.lam_bounds > 0)
     return np.where(at_lower | at_upper, sol.lam_bounds, 0.0)
+
+
+def _standing(
+    sol: QPSolution, qp: QP, it: _Iterate, bounds: Bounds, options: SQPOptions
+) -> tuple[np.ndarray, np.ndarray, str]:
+    """The multipliers (rows, own bounds) of a QP whose step is nothing, and the run's
+    status there: converged, else stalled."""
+    lam_g, lam_x = sol.lam_rows, _own_bound_multipliers(sol, qp, it, bounds)
+    if _converged(it, lam_g, lam_x, bounds, options):
+        return lam_g, lam_x, SUCCEEDED
+    return lam_g, lam_x, _stalled(it, bounds, options)
 
 
 def _stalled(it: _Iterate, bounds: Bounds, options: SQPOptions) -> str:
