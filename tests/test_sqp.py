@@ -157,9 +157,10 @@ def test_infeasible_qp_is_reported_not_solved():
     assert registry.solve(qp).status == "infeasible"
 
 
-def test_convexified_lifts_semidefinite_and_clips_negative_curvature():
-    """In the scaled variables: δ added where S H S is positive semi-definite, else the
-    eigenvalues below δ raised to δ, the others and every eigenvector kept."""
+def test_convexified_lifts_semidefinite_and_flips_negative_curvature():
+    """In the scaled variables: δ added where S H S is positive semi-definite, else (no row
+    held) the negative eigenvalues flipped, those below δ raised to δ, every eigenvector
+    kept."""
     rng = np.random.default_rng(4)
     scale = np.concatenate([np.ones(6), np.full(4, 900.0)])
     M = rng.normal(size=(6, 6))
@@ -175,7 +176,8 @@ def test_convexified_lifts_semidefinite_and_clips_negative_curvature():
     assert modified
     w, V = np.linalg.eigh(H * S)
     assert np.linalg.eigvalsh(Bs).min() >= DELTA * (1 - 1e-9)
-    np.testing.assert_allclose(Bs @ V, V * np.maximum(w, DELTA), atol=1e-8)
+    assert w.min() < -DELTA
+    np.testing.assert_allclose(Bs @ V, V * np.maximum(np.abs(w), DELTA), atol=1e-8)
 
 
 def _indefinite_with_held_rows(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -191,7 +193,7 @@ def _indefinite_with_held_rows(rng: np.random.Generator) -> tuple[np.ndarray, np
 def test_convexified_keeps_the_curvature_on_the_null_space_of_the_rows_held():
     """With rows held (their gradients in the scaled variables), B̃ = S H S + δ I + τ ÂᵀÂ for
     the smallest τ of AUGMENT that makes it positive definite: equal to S H S + δ I on their
-    null space, and C d̃ = τ (Â d̃) / ‖row‖; a direction the rows do not hold gets clipped."""
+    null space, and C d̃ = τ (Â d̃) / ‖row‖; a direction the rows do not hold gets flipped."""
     rng = np.random.default_rng(8)
     H, A = _indefinite_with_held_rows(rng)
     scale = np.ones(8)
@@ -209,11 +211,12 @@ def test_convexified_keeps_the_curvature_on_the_null_space_of_the_rows_held():
     for w in [w for w in AUGMENT if w < weight * (1 - 1e-9)]:  # a smaller one would not do
         B = H + DELTA * np.eye(8) + w * max(1.0, np.abs(H).max()) * unit.T @ unit
         assert np.linalg.eigvalsh(B - 0.5 * DELTA * np.eye(8)).min() < 0
-    H_free = H - 60.0 * np.eye(8)  # negative on the null space too: clipped instead
+    H_free = H - 60.0 * np.eye(8)  # negative on the null space too: flipped instead
     Bs, modified, C = convexified(H_free, scale, A)
     assert modified and not C.any()
     w, V = np.linalg.eigh(H_free)
-    np.testing.assert_allclose(Bs @ V, V * np.maximum(w, DELTA), atol=1e-8)
+    assert w.min() < -DELTA
+    np.testing.assert_allclose(Bs @ V, V * np.maximum(np.abs(w), DELTA), atol=1e-8)
 
 
 def _coupled(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
