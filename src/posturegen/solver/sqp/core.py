@@ -379,9 +379,10 @@ def _curvature(Bs: np.ndarray, d: np.ndarray, scale: np.ndarray) -> float:
 # the fractions θ of the violated rows' linearized correction tried when the QP has no
 # solution (Vardi's relaxation; at θ = 0, d = 0 is feasible), after THETA_SHARE of the largest
 # θ that has one (:func:`_theta_max`) or where that QP fails. Against this ladder alone (4
-# families × 2 seeds × 49 never-seen problems, in-process): 380 -> 386 verified, 7924 ->
-# 7469 SQP iterations, near-body's slowest call 302 -> 97 ms; a share of 0.3: 385 and 8056,
-# 0.7: 386 and 7480, 0.99 (the largest θ): more iterations than the ladder on reach-balance
+# families × 2 seeds × 49 never-seen problems, in-process): 380 -> 385 verified, 7924 ->
+# 7537 SQP iterations, near-body's slowest calls 302 / 294 -> 95 / 184 ms (box's 1317 ->
+# 1476); a share of 0.3: 385 and 8056, 0.7: 386 and 7480 (both with an earlier θ-max QP),
+# 0.99 (the largest θ): more iterations than the ladder on reach-balance
 THETAS = (0.5, 0.25, 0.1, 0.03, 0.01, 0.0)
 THETA_SHARE = 0.5
 # the θ-max QP's weight of θ against ½‖d̃‖²: with 1e3 it finds the largest θ of its region's
