@@ -643,3 +643,54 @@ def test_collision_runs_start_ipopt_with_their_barrier_and_regularization(monkey
     assert seen[0]["ipopt.first_hessian_perturbation"] == first
     assert seen[0]["ipopt.perturb_inc_fact_first"] == factor
     assert problem.solver_options == before
+
+
+def test_row_box_distances_below_a_threshold_are_exact_and_the_others_read_inf(talos):
+    """row_box_distances(..., below): the pairs nearer than ``below`` [m] read the rows' LSE
+    distance over the six faces (computed here face by face), the others +inf, and only
+    those whose distance is at least ``below``."""
+    from posturegen.collision.boxes import BETA, EnvBox, row_box_distances
+    from posturegen.collision.proxies import proxy_model
+
+    pm = proxy_model(talos)
+    model, pdata = talos.model, talos.model.createData()
+    np.random.seed(5)  # pinocchio's randomConfiguration draws from numpy's global state
+    boxes = [
+        EnvBox(
+            "a",
+            pin.SE3(pin.rpy.rpyToMatrix(0.3, -0.2, 1.0), np.array([0.3, -0.2, 0.8])),
+            np.array([0.2, 0.1, 0.3]),
+            frozenset(),
+        ),
+        EnvBox(
+            "b",
+            pin.SE3(np.eye(3), np.array([0.0, 0.0, -0.05])),
+            np.array([2.0, 2.0, 0.05]),
+            frozenset(),
+        ),
+    ]
+    inf_count = finite_count = 0
+    for _ in range(4):
+        q = pin.randomConfiguration(
+            model,
+            np.maximum(model.lowerPositionLimit, -0.5),
+            np.minimum(model.upperPositionLimit, 0.5),
+        )
+        pin.forwardKinematics(model, pdata, q)
+        centers = pm.centers_world(model, pdata)  # (S, 3)
+        exact = np.empty((len(centers), len(boxes)))
+        for k, b in enumerate(boxes):
+            local = (centers - b.T_world_box.translation) @ b.T_world_box.rotation
+            faces = np.concatenate([local - b.half, -local - b.half], axis=1)  # (S, 6)
+            top = faces.max(axis=1)
+            lse = top + np.log(np.exp(BETA * (faces - top[:, None])).sum(axis=1)) / BETA
+            exact[:, k] = lse - np.log(6.0) / BETA - pm.radii
+        np.testing.assert_allclose(row_box_distances(pm, centers, boxes), exact, atol=1e-12)
+        for below in (0.0, 0.05, 0.3):
+            d = row_box_distances(pm, centers, boxes, below)
+            far = np.isinf(d)
+            assert np.all(exact[far] >= below)
+            np.testing.assert_allclose(d[~far], exact[~far], atol=1e-12)
+            assert np.all(~far[exact < below])
+            inf_count, finite_count = inf_count + far.sum(), finite_count + (~far).sum()
+    assert inf_count > 0 and finite_count > 0  # both kinds met

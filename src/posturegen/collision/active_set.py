@@ -141,8 +141,10 @@ class ActiveSet:
             )
             out.violated_self = closest(bad.take(~held), SELF_PER_LINK).tuples()
         if self.boxes:
-            d_env = np.where(self.allowed, row_box_distances(self.pm, centers, self.boxes), np.inf)
-            out.near_env = self._env(d_env, margin + self.options.environment_activation)
+            near = margin + self.options.environment_activation  # the largest threshold
+            d_env = row_box_distances(self.pm, centers, self.boxes, near)
+            d_env = np.where(self.allowed, d_env, np.inf)
+            out.near_env = self._env(d_env, near)
             fresh = np.where(self._held_env(), np.inf, d_env)
             out.violated_env = self._env(fresh, margin - TOL_VIOLATION)
         if len(self.links) and (near or out.violated_self or out.violated_env):
@@ -189,8 +191,8 @@ class ActiveSet:
             keep = d < held[link] + self.options.activation
             self.self_pairs = {(int(i), int(j)) for i, j in ij[keep]}
         if self.env_pairs and self.boxes:
-            d_env = row_box_distances(self.pm, centers, self.boxes)
             near = margin + self.options.environment_activation
+            d_env = row_box_distances(self.pm, centers, self.boxes, near)
             self.env_pairs = {(i, k) for i, k in self.env_pairs if d_env[i, k] < near}
 
     def _fits(self) -> bool:

@@ -124,18 +124,26 @@ def box_distances(pm: ProxyModel, centers: np.ndarray, boxes: list[EnvBox]) -> n
     return out
 
 
-def row_box_distances(pm: ProxyModel, centers: np.ndarray, boxes: list[EnvBox]) -> np.ndarray:
+def row_box_distances(
+    pm: ProxyModel, centers: np.ndarray, boxes: list[EnvBox], below: float = np.inf
+) -> np.ndarray:
     """(S, B) the sphere-box rows' own distances [m]: LSE_β(s) - log(6)/β - r over the six
     face distances s (:func:`posturegen.collision.soft_min.box_element`), up to log(6)/β below
     :func:`box_distances`. The active set compares these with the margin, so a pair left out
     of the rows is never one whose row would be violated (a foot fixed by the next stance
     where its row read 1.4 mm under the margin, though 3.6 mm clear by the faces' maximum,
-    made ATLAS' stairs infeasible)."""
-    out = np.empty((len(centers), len(boxes)))
+    made ATLAS' stairs infeasible). A pair that is at least ``below`` [m] away by the lower
+    bound max(s) - log(6)/β - r (LSE >= max) reads +inf: a comparison with a threshold <=
+    ``below`` is the same, and the exponentials of the far spheres (most) are not taken."""
+    out = np.full((len(centers), len(boxes)), np.inf)
+    shift = np.log(6.0) / BETA
     for k, b in enumerate(boxes):
-        local = (centers - b.T_world_box.translation) @ b.T_world_box.rotation
-        s = np.concatenate([local - b.half, -local - b.half], axis=1)  # (S, 6)
-        smax = s.max(axis=1)
+        local = (centers - b.T_world_box.translation) @ b.T_world_box.rotation  # (S, 3)
+        excess = np.abs(local) - b.half  # (S, 3) the larger face distance of each axis
+        smax = np.maximum(np.maximum(excess[:, 0], excess[:, 1]), excess[:, 2])  # (S,)
+        near = np.flatnonzero(smax - shift - pm.radii < below)
+        local, smax = local[near], smax[near]
+        s = np.concatenate([local - b.half, -local - b.half], axis=1)  # (n, 6)
         lse = smax + np.log(np.exp(BETA * (s - smax[:, None])).sum(axis=1)) / BETA
-        out[:, k] = lse - np.log(6.0) / BETA - pm.radii
+        out[near, k] = lse - shift - pm.radii[near]
     return out

@@ -23,7 +23,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..model.robot import Robot
-from . import pairs, proxy_fit, surface
+from . import pairs, proxy_fit, sphere_kernel, surface
 from .pairs import PairRule, pair_rule
 from .proxy_fit import PROXY_VERSION, Sphere, fit_robot
 
@@ -146,6 +146,7 @@ class ProxyModel:
         self._group_runs = _Runs.of(
             self._group_start, np.arange(len(sizes)), self._local, self._radii
         )
+        self._compiled: sphere_kernel.SphereSearch | None = None
 
     def pair_clearance(self, margin: float) -> np.ndarray:
         """(P,) [m] how far apart each candidate joint pair is held: min(margin, clearance),
@@ -184,6 +185,8 @@ class ProxyModel:
         among the joint pairs ``links`` (indices, default all), for sphere centres (S, 3) in
         world. Joint pairs, then pairs of groups, whose bounding spheres are farther apart
         than the slack (a lower bound of every distance between their spheres) are skipped."""
+        if (search := self._search()) is not None:
+            return Close(*search.close(centers, *self._bounds(centers), slack, self._links(links)))
         groups = self._group_pairs(centers, slack, links)
         return self._sphere_pairs(centers, groups, slack[groups.link])
 
@@ -200,6 +203,10 @@ class ProxyModel:
         give T, its per_link-th smallest distance so far (the slack while fewer): an upper
         bound of the per_link-th smallest of all; then only the pairs that their bounding
         spheres leave below T are measured."""
+        if (search := self._search()) is not None:
+            ordered = np.sort(self._links(links))  # the pairs sorted by joint pair
+            found = search.close(centers, *self._bounds(centers), slack, ordered, per_link)
+            return Close(*found)
         groups = self._group_pairs(centers, slack, links)
         order = np.lexsort((groups.gap, groups.link))
         first = np.zeros(len(order), dtype=bool)
@@ -214,6 +221,31 @@ class ProxyModel:
         pairs = zip(found.fields(), more.fields(), strict=True)
         both = Close(*(np.concatenate([a, b]) for a, b in pairs))
         return closest(both, per_link)
+
+    def _search(self) -> sphere_kernel.SphereSearch | None:
+        """The compiled search of these proxies (made at first use), or None without it."""
+        if not sphere_kernel.available():
+            return None
+        if self._compiled is None:
+            self._compiled = sphere_kernel.SphereSearch(
+                self._radii,
+                self.joint_pairs,
+                self._gp_start,
+                self._ga,
+                self._gb,
+                self._group_start,
+            )
+        return self._compiled
+
+    def _bounds(
+        self, centers: np.ndarray
+    ) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+        """The groups' and the joints' bounding spheres (centres, radii) for centres (S, 3)."""
+        return self._group_runs.bounds(centers), self._joint_runs.bounds(centers)
+
+    def _links(self, links: np.ndarray | None) -> np.ndarray:
+        """The joint pair indices ``links`` (default all)."""
+        return np.arange(len(self.joint_pairs)) if links is None else np.asarray(links, dtype=int)
 
     def _group_pairs(
         self, centers: np.ndarray, slack: np.ndarray, links: np.ndarray | None
