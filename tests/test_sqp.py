@@ -602,7 +602,7 @@ def test_a_run_settles_after_feasible_iterates_whose_cost_no_longer_changes():
     options = SQPOptions()
 
     def at(f: float, g: float) -> _Iterate:
-        return _Iterate(np.zeros(1), f, np.zeros(1), np.array([g]), np.zeros((1, 1)))
+        return _Iterate.of(np.zeros(1), f, np.zeros(1), np.array([g]), np.zeros((1, 1)), bounds)
 
     flat = _Flat()
     costs = 2.0 - 1e-8 * np.arange(3 * core.FLAT_ITERATIONS)
@@ -624,7 +624,7 @@ def test_the_model_counts_no_linearized_residue_below_the_qps_tolerance():
     grad = np.array([1.0, 0.0])
     J = np.zeros((3, 2))
     J[0, 1] = 1.0  # the rows move with x₁ only, the cost with x₀
-    it = _Iterate(np.zeros(2), 0.0, grad, np.zeros(3), J)
+    it = _Iterate.of(np.zeros(2), 0.0, grad, np.zeros(3), J, bounds)
     Bs = np.eye(2)
     d = np.array([-1e-3, 5e-10])  # row 0 off by 5e-10: the QP's residue
     assert _model_reduction(it, Bs, d, bounds, 1e8) == pytest.approx(1e-3 - 0.5e-6, rel=1e-9)

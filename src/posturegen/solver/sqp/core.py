@@ -130,7 +130,7 @@ class _Flat:
     def settled(self, it: _Iterate, bounds: Bounds, options: SQPOptions) -> bool:
         """Count an accepted iterate; True after FLAT_ITERATIONS feasible ones whose cost
         changed by at most FLAT_CHANGE × max(1, |f|)."""
-        if _max_abs(bounds.violation(it.g)) > options.tol_primal:
+        if it.worst > options.tol_primal:
             self.costs.clear()
             return False
         self.costs.append(it.f)
@@ -143,9 +143,20 @@ class _Flat:
 class _Iterate:
     x: np.ndarray
     f: float
-    grad: np.ndarray
-    g: np.ndarray
-    J: np.ndarray
+    grad: np.ndarray  # (n,)
+    g: np.ndarray  # (m,)
+    J: np.ndarray  # (m, n)
+    viol: np.ndarray  # (m,) how far each row is outside its bounds
+    l1: float  # ‖viol‖₁
+    worst: float  # ‖viol‖∞
+
+    @classmethod
+    def of(
+        cls, x: np.ndarray, f: float, grad: np.ndarray, g: np.ndarray, J: np.ndarray, bounds: Bounds
+    ) -> _Iterate:
+        """The iterate at x of f, ∇f, g and J, its violations measured against ``bounds``."""
+        viol = bounds.violation(g)
+        return cls(x, f, grad, g, J, viol, float(np.sum(viol)), _max_abs(viol))
 
 
 def sqp(
@@ -165,10 +176,10 @@ def sqp(
     # the iterate's QP model in the scaled variables: the same arrays for each of its QPs
     # (the QP backend keeps its factorization for them)
     scaled: _Model | None = None
-    stall = _Stall(float(np.sum(bounds.violation(it.g))))
+    stall = _Stall(it.l1)
     flat = _Flat()
     for _ in range(options.max_iter):
-        run.rows_bound |= bounds.violation(it.g) > 0
+        run.rows_bound |= it.viol > 0
         stop = _stop(it, lam_g, lam_x, bounds, options, stall, t0)
         if stop is not None:
             run.status = stop
@@ -185,7 +196,7 @@ def sqp(
         if d_size < 1e-12:  # the QP stays where it is: its multipliers are the news
             lam_g, lam_x, run.status = _standing(sol, qp, it, bounds, options)
             break
-        run.history.append((it.f, _max_abs(bounds.violation(it.g)), radius))
+        run.history.append((it.f, it.worst, radius))
         step = _try_step(oracle, it, sol, qp, bounds, penalty, options)
         if step is None:  # rejected: a smaller region
             radius = SHRINK * min(radius, d_size)
@@ -259,7 +270,7 @@ def _stop(
         return SUCCEEDED
     if time.perf_counter() - t0 > options.max_time_s:
         return "Maximum_CpuTime_Exceeded"
-    if stall.stuck(float(np.sum(bounds.violation(it.g))), options):
+    if stall.stuck(it.l1, options):
         return "Infeasible_Problem_Detected"
     return None
 
@@ -278,7 +289,7 @@ def _first(
     lam_x = np.zeros(oracle.n) if lam_x0 is None else np.array(lam_x0, dtype=float)
     run = SQPRun(x, 0.0, lam_g, lam_x, "Maximum_Iterations_Exceeded", 0, 0, duals0, 0.0)
     run.rows_bound = np.zeros(oracle.m, dtype=bool)
-    return run, _at(oracle, x)
+    return run, _at(oracle, x, bounds)
 
 
 def _step(
@@ -332,7 +343,7 @@ def _converged(
 ) -> bool:
     """Primal feasibility, stationarity of the Lagrangian, and multipliers of the right sign
     only at rows at their bounds (complementarity, to tol_dual)."""
-    if _max_abs(bounds.violation(it.g)) > options.tol_primal:
+    if it.worst > options.tol_primal:
         return False
     r = it.grad + it.J.T @ lam_g + lam_x
     scale = max(1.0, _max_abs(it.grad))
@@ -492,7 +503,7 @@ def _steered(it: _Iterate, Bs: np.ndarray, d: np.ndarray, bounds: Bounds, penalt
     """ν large enough that the step's predicted reduction is at least half its reduction of
     the linearized violation, ν ≥ (∇fᵀd + ½dᵀBd) / ((1 - 0.5) Δv) (Nocedal & Wright, 18.36):
     ν follows what the steps need, not the QP's multipliers (a degenerate QP's run to 1e4)."""
-    dv = float(np.sum(bounds.violation(it.g))) - _linearized_violation(it, d, bounds)
+    dv = it.l1 - _linearized_violation(it, d, bounds)
     q = float(it.grad @ d) + _curvature(Bs, d, bounds.scale)
     if dv > 1e-14 and q > 0:
         penalty = max(penalty, q / (0.5 * dv))
@@ -515,7 +526,7 @@ def _model_reduction(
     it: _Iterate, Bs: np.ndarray, d: np.ndarray, bounds: Bounds, penalty: float
 ) -> float:
     """ν‖viol(g)‖₁ - (∇fᵀd + ½dᵀBd + ν‖viol(g + J d)‖₁): what the step promises."""
-    v0 = float(np.sum(bounds.violation(it.g)))
+    v0 = it.l1
     v1 = _linearized_violation(it, d, bounds)
     return penalty * (v0 - v1) - float(it.grad @ d) - _curvature(Bs, d, bounds.scale)
 
@@ -532,13 +543,13 @@ def _try_step(
     """The next iterate and its ratio actual / predicted reduction, or None when neither the
     step nor its second-order correction reduces the merit enough."""
     pred = _model_reduction(it, qp.B, sol.d, bounds, penalty)  # qp.B: B̃
-    merit0 = it.f + penalty * float(np.sum(bounds.violation(it.g)))
+    merit0 = it.f + penalty * it.l1
     if pred <= 1e-16 * max(1.0, abs(merit0)):
         return None
     # the trial point's first-order values at once: an accepted step (most of them) is the
     # next iterate without evaluating f and g twice
-    trial = _at(oracle, np.clip(it.x + sol.d, bounds.lbx, bounds.ubx))
-    ratio = (merit0 - trial.f - penalty * float(np.sum(bounds.violation(trial.g)))) / pred
+    trial = _at(oracle, np.clip(it.x + sol.d, bounds.lbx, bounds.ubx), bounds)
+    ratio = (merit0 - trial.f - penalty * trial.l1) / pred
     if not ratio >= ETA:  # NaN (f or g not finite at the trial point): rejected
         # second-order correction: the rows shifted by their curvature along d
         shift = trial.g - it.g - it.J @ sol.d
@@ -549,16 +560,16 @@ def _try_step(
         if not corrected.solved:
             return None
         corrected = _unscaled(corrected, bounds.scale)
-        trial = _at(oracle, np.clip(it.x + corrected.d, bounds.lbx, bounds.ubx))
-        ratio = (merit0 - trial.f - penalty * float(np.sum(bounds.violation(trial.g)))) / pred
+        trial = _at(oracle, np.clip(it.x + corrected.d, bounds.lbx, bounds.ubx), bounds)
+        ratio = (merit0 - trial.f - penalty * trial.l1) / pred
         if not ratio >= ETA:  # NaN (f or g not finite at the trial point): rejected
             return None
     return trial, ratio
 
 
-def _at(oracle: Oracle, x: np.ndarray) -> _Iterate:
-    """The iterate at x: f, ∇f, g and J."""
-    return _Iterate(x, *oracle.first_order(x))
+def _at(oracle: Oracle, x: np.ndarray, bounds: Bounds) -> _Iterate:
+    """The iterate at x: f, ∇f, g, J and the rows' violations."""
+    return _Iterate.of(x, *oracle.first_order(x), bounds)
 
 
 def _own_bound_multipliers(sol: QPSolution, qp: QP, it: _Iterate, bounds: Bounds) -> np.ndarray:
@@ -581,6 +592,6 @@ def _standing(
 
 def _stalled(it: _Iterate, bounds: Bounds, options: SQPOptions) -> str:
     """Why the region shrank to nothing: infeasible when the constraints do not hold."""
-    if _max_abs(bounds.violation(it.g)) > options.tol_primal:
+    if it.worst > options.tol_primal:
         return "Infeasible_Problem_Detected"
     return "Search_Direction_Becomes_Too_Small"
