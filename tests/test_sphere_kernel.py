@@ -1,5 +1,6 @@
 """The compiled sphere search (posturegen.collision.sphere_kernel) finds the pairs the numpy
-search finds, in the same order, on seeded random postures of Talos and HRP-2."""
+search finds, in the same order and at the same distances (bit for bit), on seeded random
+postures of Talos and HRP-2."""
 
 from __future__ import annotations
 
@@ -51,9 +52,10 @@ def test_the_compiled_search_finds_the_numpy_searchs_pairs_in_its_order(name, mo
             ours = _search(pm, monkeypatch, True, centers, slack, links, per_link)
             reference = _search(pm, monkeypatch, False, centers, slack, links, per_link)
             assert len(ours.i) == len(reference.i)
-            for a, b in zip(ours.fields()[:3], reference.fields()[:3], strict=True):
+            # bit for bit, distances too: a pair's distance sets its hold in the program, and a
+            # last bit made IPOPT fail a stage of HRP-2's vertical ladder
+            for a, b in zip(ours.fields(), reference.fields(), strict=True):
                 assert np.array_equal(a, b)
-            np.testing.assert_allclose(ours.d, reference.d, rtol=0, atol=1e-12)
             assert np.all(ours.d < slack[ours.link])
             found += len(ours.i)
     assert found > 100  # the postures bring pairs within the slack: the comparison has content

@@ -135,7 +135,7 @@ def test_a_stances_first_scan_finds_the_pairs_of_a_scan_with_its_own_holds():
     the same joints and another base pose reads the first's entries (the search runs in the
     base's frame, a function of the joints alone), and they are its own search's too."""
     from posturegen.collision import active_set
-    from posturegen.collision.proxies import closest
+    from posturegen.collision.broad_phase import closest
 
     def fresh(active, centres, margin):
         clearance = np.minimum(active.pm.pair_clearance(margin), active.caps)

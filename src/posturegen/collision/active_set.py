@@ -20,8 +20,9 @@ import pinocchio as pin
 from .._cache import BoundedCache, Ref
 from ..model.kinematics import at_origin, base_to_world, scratch_data
 from .boxes import CollisionOptions, EnvBox, env_boxes, excluded_joint_ids, row_box_distances
+from .broad_phase import Close, closest
 from .mesh_check import placed_intersections
-from .proxies import Close, ProxyModel, closest, proxy_model
+from .proxies import ProxyModel, proxy_model
 from .rows import CollisionTerm
 from .slots import SELF_SLOT_BLOCK, Capacity, SelfFill
 from .stance_hold import CAP_REACH, stance_caps

@@ -24,6 +24,7 @@ import pinocchio as pin
 
 from ..model.robot import Robot
 from . import pairs, proxy_fit, sphere_kernel, surface
+from .broad_phase import Close, GroupPairs, Runs, closest, rank_in_runs
 from .pairs import PairRule, pair_rule
 from .proxy_fit import PROXY_VERSION, Sphere, fit_robot
 
@@ -44,53 +45,6 @@ GROUP = 16  # spheres per group of the broad phase (a joint's spheres split by t
 # group pairs of each joint pair measured first by ProxyModel.closest_pairs (the nearest by
 # their bounding spheres): their pairs bound the distance of the ones kept
 FIRST_GROUPS = 3
-# [m] added to a run's bounding radius: its world mean moves with rounding (1e-16 m) that
-# the radius, computed once in the joint's frame, does not follow
-BOUND_PAD = 1e-9
-
-
-@dataclass(frozen=True)
-class Close:
-    """Candidate sphere pairs found close: sphere indices i (of the joint pair's first joint)
-    and j, their joint pair (index into ProxyModel.joint_pairs) and distance [m], each (k,)."""
-
-    i: np.ndarray
-    j: np.ndarray
-    link: np.ndarray
-    d: np.ndarray
-
-    def take(self, index: np.ndarray) -> Close:
-        """The pairs at ``index`` (a mask or indices)."""
-        return Close(self.i[index], self.j[index], self.link[index], self.d[index])
-
-    def fields(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(i, j, link, d)."""
-        return self.i, self.j, self.link, self.d
-
-    def tuples(self) -> set[tuple[int, int]]:
-        """{(min(i, j), max(i, j))}: the pairs as the program holds them."""
-        lo, hi = np.minimum(self.i, self.j), np.maximum(self.i, self.j)
-        return {(int(a), int(b)) for a, b in zip(lo, hi, strict=True)}
-
-
-@dataclass(frozen=True)
-class _GroupPairs:
-    """Pairs of sphere groups (ProxyModel's broad phase): their groups ga, gb (n,), joint
-    pair (n,), the gap of their bounding spheres (n,) [m], and every group's bounding sphere
-    (centres (G, 3), radii (G,))."""
-
-    ga: np.ndarray
-    gb: np.ndarray
-    link: np.ndarray
-    gap: np.ndarray
-    gc: np.ndarray
-    gr: np.ndarray
-
-    def take(self, index: np.ndarray) -> _GroupPairs:
-        """The pairs at ``index`` (a mask or indices)."""
-        return _GroupPairs(
-            self.ga[index], self.gb[index], self.link[index], self.gap[index], self.gc, self.gr
-        )
 
 
 @dataclass
@@ -142,8 +96,8 @@ class ProxyModel:
             self._pair_table[self.joint_pairs[:, 0], self.joint_pairs[:, 1]] = np.arange(
                 len(self.joint_pairs)
             )
-        self._joint_runs = _Runs.of(self._joint_start, self._joints, self._local, self._radii)
-        self._group_runs = _Runs.of(
+        self._joint_runs = Runs.of(self._joint_start, self._joints, self._local, self._radii)
+        self._group_runs = Runs.of(
             self._group_start, np.arange(len(sizes)), self._local, self._radii
         )
         self._compiled: sphere_kernel.SphereSearch | None = None
@@ -186,7 +140,8 @@ class ProxyModel:
         world. Joint pairs, then pairs of groups, whose bounding spheres are farther apart
         than the slack (a lower bound of every distance between their spheres) are skipped."""
         if (search := self._search()) is not None:
-            return Close(*search.close(centers, *self._bounds(centers), slack, self._links(links)))
+            found = search.close(centers, *self._bounds(centers), slack, self._links(links))
+            return self._measured(centers, *found[:3])
         groups = self._group_pairs(centers, slack, links)
         return self._sphere_pairs(centers, groups, slack[groups.link])
 
@@ -206,15 +161,15 @@ class ProxyModel:
         if (search := self._search()) is not None:
             ordered = np.sort(self._links(links))  # the pairs sorted by joint pair
             found = search.close(centers, *self._bounds(centers), slack, ordered, per_link)
-            return Close(*found)
+            return self._measured(centers, *found[:3])
         groups = self._group_pairs(centers, slack, links)
         order = np.lexsort((groups.gap, groups.link))
         first = np.zeros(len(order), dtype=bool)
-        first[order[_rank_in_runs(groups.link[order]) < FIRST_GROUPS]] = True
+        first[order[rank_in_runs(groups.link[order]) < FIRST_GROUPS]] = True
         found = self._sphere_pairs(centers, groups.take(first), slack[groups.link[first]])
         bound = np.array(slack, dtype=float)  # (P,) [m] T of each joint pair
         near = closest(found, per_link)  # sorted by joint pair, then distance
-        kth = _rank_in_runs(near.link) == per_link - 1
+        kth = rank_in_runs(near.link) == per_link - 1
         bound[near.link[kth]] = np.minimum(bound[near.link[kth]], near.d[kth])
         rest = groups.take(~first & (groups.gap <= bound[groups.link]))
         more = self._sphere_pairs(centers, rest, bound[rest.link])
@@ -237,6 +192,15 @@ class ProxyModel:
             )
         return self._compiled
 
+    def _measured(
+        self, centers: np.ndarray, i: np.ndarray, j: np.ndarray, link: np.ndarray
+    ) -> Close:
+        """The pairs (i, j) of joint pairs ``link`` found by the compiled search, their
+        distances measured here as the numpy search measures them (bit for bit: the C sums
+        differ in the last bit, and a pair's distance sets its hold in the program, where
+        IPOPT's path follows it: HRP-2's vertical ladder failed a stage on such bits)."""
+        return Close(i, j, link, self.distances(centers, i, j))
+
     def _bounds(
         self, centers: np.ndarray
     ) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
@@ -249,7 +213,7 @@ class ProxyModel:
 
     def _group_pairs(
         self, centers: np.ndarray, slack: np.ndarray, links: np.ndarray | None
-    ) -> _GroupPairs:
+    ) -> GroupPairs:
         """The pairs of groups of the joint pairs ``links`` (default all) whose bounding
         spheres are closer than their joint pair's ``slack`` (P,) [m] (joint pairs first)."""
         k = np.arange(len(self.joint_pairs)) if links is None else np.asarray(links, dtype=int)
@@ -263,9 +227,9 @@ class ProxyModel:
         ga, gb, link = self._ga[gp], self._gb[gp], self._gp_link[gp]
         gap = np.linalg.norm(gc[ga] - gc[gb], axis=1) - gr[ga] - gr[gb]
         ok = gap < slack[link]  # the group pairs that pass
-        return _GroupPairs(ga[ok], gb[ok], link[ok], gap[ok], gc, gr)
+        return GroupPairs(ga[ok], gb[ok], link[ok], gap[ok], gc, gr)
 
-    def _sphere_pairs(self, centers: np.ndarray, groups: _GroupPairs, bound: np.ndarray) -> Close:
+    def _sphere_pairs(self, centers: np.ndarray, groups: GroupPairs, bound: np.ndarray) -> Close:
         """The sphere pairs of the group pairs ``groups`` closer than their ``bound`` (n,) [m]:
         each sphere against the other group's bounding sphere, then the pairs of survivors."""
         ga, gb, link, gc, gr = groups.ga, groups.gb, groups.link, groups.gc, groups.gr
@@ -321,56 +285,6 @@ class ProxyModel:
     def joint_ids(self) -> np.ndarray:
         """(S,) each sphere's joint."""
         return self._joint
-
-
-def closest(close: Close, per_link: int) -> Close:
-    """The ``per_link`` closest pairs of each joint pair among ``close``, sorted by joint
-    pair, then distance."""
-    order = np.lexsort((close.d, close.link))
-    return close.take(order[_rank_in_runs(close.link[order]) < per_link])
-
-
-def _rank_in_runs(keys: np.ndarray) -> np.ndarray:
-    """(n,) each entry's position in its run of equal ``keys`` (n,), sorted."""
-    return np.arange(len(keys)) - np.searchsorted(keys, keys)
-
-
-@dataclass(frozen=True)
-class _Runs:
-    """Bounding spheres of runs of spheres (a joint's, a group's: each run on one joint).
-    A run's radius is that of its local centres, rigid with the joint: the mean of its world
-    centres and the same radius (plus BOUND_PAD for rounding) bound it at every posture."""
-
-    starts: np.ndarray  # (m,) first sphere of each non-empty run
-    which: np.ndarray  # (m,) its run index
-    counts: np.ndarray  # (m,) its number of spheres
-    radius: np.ndarray  # (n,) [m] each run's radius (0 for the empty ones)
-
-    @classmethod
-    def of(
-        cls, start: np.ndarray, which: np.ndarray, local: np.ndarray, radii: np.ndarray
-    ) -> _Runs:
-        """The runs start[w]:start[w + 1] for w in ``which`` of the local centres (S, 3)."""
-        which = np.asarray(which, dtype=int)
-        which = which[start[which + 1] > start[which]]
-        counts = start[which + 1] - start[which]
-        radius = np.zeros(len(start) - 1)
-        if len(which):
-            mean = np.add.reduceat(local, start[which], axis=0) / counts[:, None]
-            rows = np.concatenate([np.arange(start[w], start[w + 1]) for w in which])
-            spread = np.linalg.norm(local[rows] - np.repeat(mean, counts, axis=0), axis=1)
-            top = np.maximum.reduceat(spread + radii[rows], np.cumsum(counts) - counts)
-            radius[which] = top + BOUND_PAD
-        return cls(start[which], which, counts, radius)
-
-    def bounds(self, centers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """World centres (n, 3) and radii (n,) [m] of the runs for sphere centres (S, 3) in
-        world (rows of empty runs unused)."""
-        mean = np.zeros((len(self.radius), 3))
-        if len(self.which):
-            sums = np.add.reduceat(centers, self.starts, axis=0)
-            mean[self.which] = sums / self.counts[:, None]
-        return mean, self.radius
 
 
 def _rows_in(rows: np.ndarray, table: np.ndarray) -> np.ndarray:

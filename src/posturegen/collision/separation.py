@@ -12,7 +12,8 @@ import pinocchio as pin
 from .._cache import BoundedCache, Ref
 from ..model.kinematics import scratch_data
 from ..model.robot import Robot
-from .proxies import Close, ProxyModel
+from .broad_phase import Close
+from .proxies import ProxyModel
 
 SEPARATION = 0.03  # [m] how far above its clearance the first start puts each close pair
 SEPARATED_PER_LINK = 2  # the closest sphere pairs of each joint pair that the start parts
