@@ -33,8 +33,9 @@ from .oracle import Oracle
 
 ETA = 1e-4  # a step is taken when the merit decreases by this fraction of the model's
 # a rejected step's region: this fraction of the smaller of the region and the step (0.25
-# until 2026-12-05: 4 never-seen families x 2 seeds x 49 problems in-process, 7842 -> 7407
-# SQP iterations, the same 388 verified; 0.35 and 0.7: 7744 and 7906, 0.7 verified 384)
+# until 2026-12-05: 4 never-seen families x 2 seeds x 49 problems in-process, 7864 -> 7393
+# SQP iterations, the same 388 verified; 0.35 and 0.7: 7744 and 7906, 0.7 verified 384, these
+# two measured with a scan whose distances differed in the last bit)
 SHRINK = 0.5
 RADIUS_MAX = 4.0  # [scaled units] the trust region's largest radius
 PENALTY_MAX = 1e8
