@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .._compiler import cache_root, compiler
+from ..errors import PosturegenError
 
 _SOURCE = r"""
 #include <math.h>
@@ -168,8 +169,7 @@ class SphereSearch:
         self._r = np.ascontiguousarray(radii, dtype=float)
         self._tables = [longs(joint_pairs), longs(group_pair_start), longs(ga), longs(gb)]
         self._tables.append(longs(group_start))
-        self._best = np.zeros(0)  # room for the closest of a joint pair: `hit` structs
-        self._cap = 4096
+        self._cap = 4096  # the output's first size (grown to what a search found)
 
     def close(
         self,
@@ -181,12 +181,13 @@ class SphereSearch:
         per_link: int = 0,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(i, j, link, d) of the sphere pairs of ``links`` closer than their slack; with
-        ``per_link`` the closest of each joint pair, sorted by distance."""
+        ``per_link`` the closest of each joint pair, sorted by distance. Callers check
+        :func:`available` first; every array is this call's own (threads may search at once)."""
         lib = _library()
         if lib is None:
-            raise RuntimeError("the compiled sphere search is not available")
-        if self._best.size < per_link * _HIT_BYTES // 8:
-            self._best = np.zeros(per_link * _HIT_BYTES // 8)
+            raise PosturegenError("the compiled sphere search is not available")
+        best = np.zeros(max(per_link, 1) * _HIT_BYTES // 8)  # the closest of a joint pair
+        cap = self._cap
         doubles = [
             np.ascontiguousarray(a, dtype=float)
             for a in (centers, group_bounds[0], group_bounds[1], joint_bounds[0], joint_bounds[1])
@@ -194,8 +195,8 @@ class SphereSearch:
         links = np.ascontiguousarray(links, dtype=np.int64)
         slack = np.ascontiguousarray(slack, dtype=float)
         while True:
-            out = [np.empty(self._cap, dtype=np.int64) for _ in range(3)]
-            d = np.empty(self._cap)
+            out = [np.empty(cap, dtype=np.int64) for _ in range(3)]
+            d = np.empty(cap)
             n = lib.close_pairs(
                 _ptr(doubles[0], _DOUBLE_P),
                 _ptr(self._r, _DOUBLE_P),
@@ -206,11 +207,11 @@ class SphereSearch:
                 _LONG(len(links)),
                 _ptr(slack, _DOUBLE_P),
                 _LONG(per_link),
-                self._best.ctypes.data_as(ctypes.c_void_p),
+                best.ctypes.data_as(ctypes.c_void_p),
                 *(_ptr(a, _LONG_P) for a in out),
                 _ptr(d, _DOUBLE_P),
-                _LONG(self._cap),
+                _LONG(cap),
             )
-            if n <= self._cap:
+            if n <= cap:
                 return out[0][:n], out[1][:n], out[2][:n], d[:n]
-            self._cap = int(2 ** np.ceil(np.log2(n)))
+            cap = self._cap = int(2 ** np.ceil(np.log2(n)))
