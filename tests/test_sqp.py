@@ -606,12 +606,10 @@ def test_a_run_settles_after_feasible_iterates_whose_cost_no_longer_changes():
 
     flat = _Flat()
     costs = 2.0 - 1e-8 * np.arange(3 * core.FLAT_ITERATIONS)
-    settled = [
-        flat.settled(at(f, 0.0 if i != 4 else 1e-3), bounds, options) for i, f in enumerate(costs)
-    ]
+    settled = [flat.settled(at(f, 0.0 if i != 4 else 1e-3), options) for i, f in enumerate(costs)]
     assert settled.index(True) == 4 + core.FLAT_ITERATIONS  # the count restarted after #4
     falling = _Flat()
-    assert not any(falling.settled(at(2.0 - 1e-4 * i, 0.0), bounds, options) for i in range(50))
+    assert not any(falling.settled(at(2.0 - 1e-4 * i, 0.0), options) for i in range(50))
 
 
 def test_the_model_counts_no_linearized_residue_below_the_qps_tolerance():

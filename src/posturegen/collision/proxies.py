@@ -141,7 +141,7 @@ class ProxyModel:
         than the slack (a lower bound of every distance between their spheres) are skipped."""
         if (search := self._search()) is not None:
             found = search.close(centers, *self._bounds(centers), slack, self._links(links))
-            return self._measured(centers, *found[:3])
+            return self._measured(centers, *found)
         groups = self._group_pairs(centers, slack, links)
         return self._sphere_pairs(centers, groups, slack[groups.link])
 
@@ -161,7 +161,7 @@ class ProxyModel:
         if (search := self._search()) is not None:
             ordered = np.sort(self._links(links))  # the pairs sorted by joint pair
             found = search.close(centers, *self._bounds(centers), slack, ordered, per_link)
-            return self._measured(centers, *found[:3])
+            return self._measured(centers, *found)
         groups = self._group_pairs(centers, slack, links)
         order = np.lexsort((groups.gap, groups.link))
         first = np.zeros(len(order), dtype=bool)
@@ -216,7 +216,7 @@ class ProxyModel:
     ) -> GroupPairs:
         """The pairs of groups of the joint pairs ``links`` (default all) whose bounding
         spheres are closer than their joint pair's ``slack`` (P,) [m] (joint pairs first)."""
-        k = np.arange(len(self.joint_pairs)) if links is None else np.asarray(links, dtype=int)
+        k = self._links(links)
         jc, jr = self._joint_runs.bounds(centers)
         a, b = self.joint_pairs[k, 0], self.joint_pairs[k, 1]
         gap = np.linalg.norm(jc[a] - jc[b], axis=1) - jr[a] - jr[b]

@@ -179,9 +179,10 @@ class SphereSearch:
         slack: np.ndarray,  # (P,) [m]
         links: np.ndarray,  # (k,) joint pair indices
         per_link: int = 0,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(i, j, link, d) of the sphere pairs of ``links`` closer than their slack; with
-        ``per_link`` the closest of each joint pair, sorted by distance. Callers check
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(i, j, link) of the sphere pairs of ``links`` closer than their slack; with
+        ``per_link`` the closest of each joint pair, sorted by distance (the caller measures
+        them: the C distances may differ from numpy's in the last bit). Callers check
         :func:`available` first; every array is this call's own (threads may search at once)."""
         lib = _library()
         if lib is None:
@@ -213,5 +214,5 @@ class SphereSearch:
                 _LONG(cap),
             )
             if n <= cap:
-                return out[0][:n], out[1][:n], out[2][:n], d[:n]
+                return out[0][:n], out[1][:n], out[2][:n]
             cap = self._cap = int(2 ** np.ceil(np.log2(n)))

@@ -128,7 +128,7 @@ class _Flat:
 
     costs: list[float] = field(default_factory=list)
 
-    def settled(self, it: _Iterate, bounds: Bounds, options: SQPOptions) -> bool:
+    def settled(self, it: _Iterate, options: SQPOptions) -> bool:
         """Count an accepted iterate; True after FLAT_ITERATIONS feasible ones whose cost
         changed by at most FLAT_CHANGE × max(1, |f|)."""
         if it.worst > options.tol_primal:
@@ -202,14 +202,14 @@ def sqp(
         if step is None:  # rejected: a smaller region
             radius = SHRINK * min(radius, d_size)
             if radius < options.radius_min:
-                run.status = _stalled(it, bounds, options)
+                run.status = _stalled(it, options)
                 break
             continue
         it, ratio = step
         lam_g = sol.lam_rows
         lam_x = _own_bound_multipliers(sol, qp, it, bounds)
         scaled = None
-        if flat.settled(it, bounds, options) and not _converged(it, lam_g, lam_x, bounds, options):
+        if flat.settled(it, options) and not _converged(it, lam_g, lam_x, bounds, options):
             run.status = ACCEPTABLE
             break
         if ratio > 0.75 and d_size >= 0.99 * radius:
@@ -588,10 +588,10 @@ def _standing(
     lam_g, lam_x = sol.lam_rows, _own_bound_multipliers(sol, qp, it, bounds)
     if _converged(it, lam_g, lam_x, bounds, options):
         return lam_g, lam_x, SUCCEEDED
-    return lam_g, lam_x, _stalled(it, bounds, options)
+    return lam_g, lam_x, _stalled(it, options)
 
 
-def _stalled(it: _Iterate, bounds: Bounds, options: SQPOptions) -> str:
+def _stalled(it: _Iterate, options: SQPOptions) -> str:
     """Why the region shrank to nothing: infeasible when the constraints do not hold."""
     if it.worst > options.tol_primal:
         return "Infeasible_Problem_Detected"

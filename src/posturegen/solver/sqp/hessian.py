@@ -98,7 +98,7 @@ def convexified(
         # B not positive definite (its entries within the cap), no smaller one makes it so
         # and the ladder is skipped (6 factorizations on a third of a reach's iterates)
         largest = lifted + (AUGMENT[-1] * base) * G
-        if _positive(largest, delta) or np.abs(largest).max() > CURVATURE_MAX:
+        if np.abs(largest).max() > CURVATURE_MAX or _factorizes(largest, -0.5 * delta):
             for weight in AUGMENT:
                 B = lifted + (weight * base) * G
                 if _positive(B, delta):
