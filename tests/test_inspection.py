@@ -83,12 +83,12 @@ def test_inspect_says_which_solver_runs(tmp_path, capsys, monkeypatch):
     data = _with([])
     path.write_text(yaml.safe_dump(data))
     assert main(["inspect", str(path)]) == 0
-    assert "solver: ipopt: IPOPT" in capsys.readouterr().out  # the default
-    data["options"]["solver"] = {"method": "auto"}
+    out = capsys.readouterr().out  # the default
+    assert "solver: auto: posturegen's SQP (QP: daqp), then IPOPT from the same start" in out
+    data["options"]["solver"] = {"method": "ipopt"}
     path.write_text(yaml.safe_dump(data))
     assert main(["inspect", str(path)]) == 0
-    out = capsys.readouterr().out
-    assert "solver: auto: posturegen's SQP (QP: daqp), then IPOPT from the same start" in out
+    assert "solver: ipopt: IPOPT" in capsys.readouterr().out
     monkeypatch.setenv("POSTUREGEN_SOLVER", "sqp")
     data["options"]["solver"] = {"qp": "proxsuite"}
     path.write_text(yaml.safe_dump(data))

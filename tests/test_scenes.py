@@ -261,3 +261,32 @@ def test_the_inclined_ladder_climbs_one_step(tmp_path: Path) -> None:
     )
     with pytest.raises(InputError, match="--steps: the inclined ladder climbs one step"):
         scene("ladder-inclined", "hrp2", 2)
+
+
+def test_climbs_and_plans_name_ipopt_unless_the_environment_names_a_solver(monkeypatch):
+    """The shipped climbs and the planner's postures each start from the one before: they
+    name SEQUENCE_METHOD (posturegen.solver.problem); a single-posture demo keeps the
+    default (auto), and $POSTUREGEN_SOLVER or a method the scene gives wins."""
+    from posturegen.planner.api import _solver_options
+    from posturegen.planner.search import Budget
+    from posturegen.solver.problem import DEFAULT_METHOD, SEQUENCE_METHOD
+
+    monkeypatch.delenv("POSTUREGEN_SOLVER", raising=False)
+    assert SEQUENCE_METHOD == "ipopt" != DEFAULT_METHOD
+    for name in ("stairs", "ladder-inclined", "ladder-vertical"):
+        assert scenes.scene(name)["options"]["solver"]["method"] == SEQUENCE_METHOD
+    assert "method" not in scenes.scene("stand-reach")["options"]["solver"]
+    seq = scenes.scene("stairs", "atlas", 1)
+    problem = stage_problem_dict(seq, seq["stages"][0], 0, None, None)
+    assert problem_from_dict(problem).solver_options.solver_method() == SEQUENCE_METHOD
+    seq = {"options": {"solver": {"max_iter": 400}}}
+    _solver_options(seq, Budget())
+    assert seq["options"]["solver"]["method"] == SEQUENCE_METHOD
+    seq = {"options": {"solver": {"method": "sqp"}}}
+    _solver_options(seq, Budget())
+    assert seq["options"]["solver"]["method"] == "sqp"
+    monkeypatch.setenv("POSTUREGEN_SOLVER", "auto")
+    assert "method" not in scenes.scene("stairs")["options"]["solver"]
+    seq = {"options": {}}
+    _solver_options(seq, Budget())
+    assert "method" not in seq["options"]["solver"]

@@ -343,7 +343,7 @@ def test_a_call_budget_starts_no_run_once_spent(monkeypatch, result):
     monkeypatch.setattr(solve_module, "run_nlp", counted)
     data = copy.deepcopy(STAND)
     data["options"]["self_collision"] = True
-    data["options"]["solver"] = {"max_iter": 3}
+    data["options"]["solver"] = {"max_iter": 3, "method": "ipopt"}
     unbounded = solve(problem_from_dict(data))
     assert not unbounded.success and len(runs) > 1
     runs.clear()
@@ -351,6 +351,11 @@ def test_a_call_budget_starts_no_run_once_spent(monkeypatch, result):
     bounded = solve(problem_from_dict(data))
     assert not bounded.success and len(runs) == 1 and bounded.iterations == 3
     assert "max_call_iter" in bounded.message
+    runs.clear()
+    data["options"]["solver"]["method"] = "auto"  # the SQP's call, then IPOPT's: each its own
+    both = solve(problem_from_dict(data))
+    assert not both.success and len(runs) == 2 and "max_call_iter" in both.message
+    assert both.iterations_by_method == {"sqp": 3, "ipopt": 3} and both.iterations == 6
     data = copy.deepcopy(STAND)
     data["options"]["solver"] = {"max_call_iter": 1000}
     roomy = solve(problem_from_dict(data))
@@ -371,12 +376,17 @@ def test_a_run_uses_only_what_is_left_of_the_call_budget():
 
     problem = list(stances_family(29, 0))[28]
     problem.solver_options = dataclasses.replace(
-        problem.solver_options, max_call_iter=40, codegen="off"
+        problem.solver_options, max_call_iter=40, codegen="off", method="ipopt"
     )
     assert problem.solver_options.max_iter > 40 + BUDGET_STEP
     result = solve(problem)
     assert not result.success and "max_call_iter" in result.message
     assert 40 <= result.iterations <= 40 + BUDGET_STEP - 1
+    # under auto, the SQP's call and IPOPT's each within it
+    problem.solver_options = dataclasses.replace(problem.solver_options, method="auto")
+    both = solve(problem)
+    assert not both.success and set(both.iterations_by_method) == {"sqp", "ipopt"}
+    assert all(40 <= n <= 40 + BUDGET_STEP - 1 for n in both.iterations_by_method.values())
 
 
 @pytest.mark.parametrize("value", [0, -1, 2.5, True, "10"])

@@ -446,8 +446,8 @@ def _add_bench_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--solver",
         default=DEFAULT_METHOD,
-        help="the solver of every problem: ipopt (default), sqp, or auto (the SQP, IPOPT when "
-        "it fails); several separated by commas run one after the other (sqp,ipopt)",
+        help="the solver of every problem: auto (default: the SQP, IPOPT when it fails), sqp "
+        "or ipopt; several separated by commas run one after the other (sqp,ipopt)",
     )
     p.add_argument(
         "--batch",

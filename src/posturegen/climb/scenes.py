@@ -16,6 +16,7 @@ from typing import Any
 
 from ..errors import InputError
 from ..model.robot import load_robot
+from ..solver.problem import with_sequence_method
 from .parts import (
     CLIMB_COSTS,
     COMMON_OPTIONS,
@@ -511,4 +512,8 @@ def scene(name: str, robot: str | None = None, steps: int | None = None) -> dict
     if name not in SCENES:
         raise InputError("scene", f"unknown scene '{name}'", f"use one of: {', '.join(SCENES)}")
     info = SCENES[name]
-    return info.build(robot or info.robot, info.demo_steps if steps is None else steps)
+    seq = info.build(robot or info.robot, info.demo_steps if steps is None else steps)
+    if info.climb_steps is not None:  # a climb: each stage starts from the one before
+        options = seq.get("options", {})
+        seq["options"] = {**options, "solver": with_sequence_method(options.get("solver", {}))}
+    return seq

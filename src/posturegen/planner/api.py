@@ -16,7 +16,7 @@ from ..climb.sequence import SequenceReport, stage_problem_dict
 from ..errors import InputError
 from ..io.problem_file import problem_from_dict, read_yaml
 from ..model.robot import Robot
-from ..solver.problem import Problem
+from ..solver.problem import Problem, with_sequence_method
 from ..solver.solve import Result, own_learning
 from .goal import Goal, parse_goal
 from .heuristic import Heuristic
@@ -145,8 +145,9 @@ PLAN_CODEGEN = "cached"
 
 
 def _solver_options(seq: dict[str, Any], budget: Budget) -> None:
-    """The stages' solver options: the budget's iterations per posture, and PLAN_CODEGEN
-    unless the scene or $POSTUREGEN_CODEGEN sets a mode."""
+    """The stages' solver options: the budget's iterations per posture, PLAN_CODEGEN unless
+    the scene or $POSTUREGEN_CODEGEN sets a mode, and SEQUENCE_METHOD unless a solver is
+    named."""
     options = seq.setdefault("options", {})
     solver = dict(options.get("solver") or {})
     if budget.posture_iterations is not None:
@@ -154,7 +155,7 @@ def _solver_options(seq: dict[str, Any], budget: Budget) -> None:
         solver["max_call_iter"] = budget.posture_iterations
     if not os.environ.get("POSTUREGEN_CODEGEN") and not solver.get("jit"):
         solver.setdefault("codegen", PLAN_CODEGEN)
-    options["solver"] = solver
+    options["solver"] = with_sequence_method(solver)
 
 
 def plan(

@@ -39,10 +39,26 @@ from .qp import registry as qp_registry
 # iterations instead of 15,417 (ATLAS stairs 7929 -> 3682, HRP-2 vertical ladder 2089 -> 2530)
 # the solvers a problem may ask for (SolverOptions.method)
 METHODS = ("auto", "sqp", "ipopt")
-# IPOPT: where the SQP fails, "auto" pays both solvers (warm, 2026-12-04: Talos' 4-step stairs
-# plan 20.7 s against 13.3 s with IPOPT alone, HRP-2's vertical ladder 27.8 against 17.6 s);
-# on the never-seen families auto's median call is as fast or faster (docs/benchmarks.md)
-DEFAULT_METHOD = "ipopt"
+# "auto": on postures never seen it verifies more than IPOPT alone, faster (2026-12-05,
+# in-process after each family's first call, 4 collision families x seeds 7 and 11 x 49
+# problems: 390 verified against 386, medians 14.9-25.0 ms against 16.9-31.1; the free
+# reach 5.4 against 6.3 ms); a posture neither verifies pays both calls (the stances' max
+# 521 against 271 ms). Sequences keep IPOPT (SEQUENCE_METHOD).
+DEFAULT_METHOD = "auto"
+# the solver of the shipped climbs and of plans, whose postures each start from the one
+# before (an SQP solution is another local solution): under "auto" HRP-2's vertical ladder
+# climb failed its stage "left foot on rung 2" (IPOPT: 17 of 17 stages) and ATLAS' 4-stair
+# plan was not reached (27.5 s; IPOPT 10.9 s, 10 stages) (2026-12-05, warm)
+SEQUENCE_METHOD = "ipopt"
+
+
+def with_sequence_method(solver: dict[str, Any]) -> dict[str, Any]:
+    """Solver options (a problem file's ``options.solver``) with SEQUENCE_METHOD, unless they
+    or $POSTUREGEN_SOLVER already name a solver."""
+    if "method" in solver or os.environ.get("POSTUREGEN_SOLVER", "").strip():
+        return dict(solver)
+    return {**solver, "method": SEQUENCE_METHOD}
+
 
 MUMPS_SCALING = {"ipopt.mumps_scaling": 0, "ipopt.mumps_permuting_scaling": 0}
 
@@ -76,11 +92,12 @@ class SolverOptions:
     # inertia is wrong (None: IPOPT's 1e-4 and 100)
     first_hessian_perturbation: float | None = None
     perturb_inc_fact_first: float | None = None
-    # the whole call's IPOPT iterations (every run of one solve: active-set rounds,
-    # continuations): a run may use only what is left (rounded up to 25), and once spent no
-    # run starts and the call fails saying so; a planner's bound on a stance that cannot be
-    # held. None: unbounded. Not part of the structure (two problems that differ only by it
-    # share their compiled program; a run cut short builds a variant with a smaller max_iter).
+    # the whole call's iterations of each solver (every run of one solve: active-set rounds,
+    # continuations; under "auto" the SQP and IPOPT each have it): a run may use only what
+    # is left of its solver's (rounded up to 25), and once spent no run of it starts and the
+    # call fails saying so; a planner's bound on a stance that cannot be held. None:
+    # unbounded. Not part of the structure (two problems that differ only by it share their
+    # compiled program; a run cut short builds a variant with a smaller max_iter).
     max_call_iter: int | None = field(default=None, compare=False)
     # which solver runs (posturegen.solver.runs): "sqp" (the SQP core, posturegen.solver.sqp),
     # "ipopt", or "auto": the SQP, then IPOPT from the same start when the SQP fails. None:

@@ -167,8 +167,12 @@ def solve(problem: Problem, x0: np.ndarray | None = None, start: Solved | None =
     fixed contacts place two links' meshes into each other cannot pass the mesh check: one
     run without collision rows, and the message says so
     (:func:`posturegen.collision.active_set.placed_blocked`). ``max_call_iter`` bounds the
-    whole call, each run to what is left of it. The Result counts every IPOPT run. Why a
-    failure failed: :func:`posturegen.solver.diagnose.diagnose`.
+    whole call, each run to what is left of it. Under ``auto`` the call is the SQP's, and
+    when it fails IPOPT's from the same start (each with its own budget): an SQP round that
+    succeeds ends elsewhere than IPOPT's, and the next rounds follow it, so that IPOPT from
+    the SQP's failed round could fail where IPOPT alone verifies. The Result counts every
+    run (a stance its fixed contacts block: the SQP's alone). Why a failure failed:
+    :func:`posturegen.solver.diagnose.diagnose`.
 
     ``x0``: the variables to start from (this problem's layout); ``start``: a solved posture
     of the same robot to start from instead (:mod:`posturegen.solver.starts`; a planner's
@@ -186,12 +190,48 @@ def solve(problem: Problem, x0: np.ndarray | None = None, start: Solved | None =
         (nq,) [m, quaternion xyzw, rad], ``torques`` (nj,) [N·m], ``forces`` per contact
         [N at points in m], ``status``, ``iterations``, timings [s], ``verification``."""
     t0 = time.perf_counter()
-    token = BUDGET.set(Budget(problem.solver_options.max_call_iter))
+    if problem.solver_options.solver_method() != "auto":
+        result = _budgeted(problem, x0, start)
+    else:  # the SQP's call, then IPOPT's from the same start when it fails
+        result = _budgeted(_using(problem, "sqp"), x0, start)
+        if not result.success and placed_blocked(Program.of(problem)) is None:
+            result = _after(result, _budgeted(_using(problem, "ipopt"), x0, start))
+    return dataclasses.replace(result, wall_time_s=time.perf_counter() - t0)
+
+
+def _using(problem: Problem, method: str) -> Problem:
+    """``problem`` solved by ``method`` (the same structure: the method is not part of it)."""
+    options = dataclasses.replace(problem.solver_options, method=method)
+    return dataclasses.replace(problem, solver_options=options)
+
+
+def _budgeted(problem: Problem, x0: np.ndarray | None, start: Solved | None) -> Result:
+    """:func:`_solve` under a budget of its own (SolverOptions.max_call_iter)."""
+    token = BUDGET.set(Budget.of(problem.solver_options))
     try:
-        result = _solve(problem, x0, start)
+        return _solve(problem, x0, start)
     finally:
         BUDGET.reset(token)
-    return dataclasses.replace(result, wall_time_s=time.perf_counter() - t0)
+
+
+def _after(failed: Result, alone: Result) -> Result:
+    """The answer of an ``auto`` call whose SQP call ``failed``: IPOPT's call (``alone``),
+    counted with every run of both."""
+    by_method = dict(failed.iterations_by_method)
+    for method, n in alone.iterations_by_method.items():
+        by_method[method] = by_method.get(method, 0) + n
+    runs = failed.posture.get("ipopt_runs", 0) + alone.posture.get("ipopt_runs", 0)
+    iterations = failed.iterations + alone.iterations
+    solve_time = failed.solve_time_s + alone.solve_time_s
+    alone.posture.update({"iterations": iterations, "solve_time_s": solve_time, "ipopt_runs": runs})
+    return dataclasses.replace(
+        alone,
+        iterations=iterations,
+        solve_time_s=solve_time,
+        build_time_s=failed.build_time_s + alone.build_time_s,
+        iterations_by_method=by_method,
+        verify_time_s=failed.verify_time_s + alone.verify_time_s,
+    )
 
 
 def _solve(problem: Problem, x0: np.ndarray | None, start: Solved | None) -> Result:
@@ -499,8 +539,9 @@ def _result(program: Program, runs: list[Run], margin: float | None = None) -> R
     message = _message(status, report, run.method)
     budget = BUDGET.get()
     if not success and budget is not None and not budget.left():
+        each = ", each solver's" if len(budget.methods) > 1 else ""
         message = (
-            f"the call's {budget.limit} iterations (options.solver.max_call_iter) were "
+            f"the call's {budget.limit} iterations (options.solver.max_call_iter{each}) were "
             f"spent: {message}"
         )
     iterations = sum(r.iterations for r in runs)
