@@ -41,7 +41,7 @@ from .qp import registry as qp_registry
 METHODS = ("auto", "sqp", "ipopt")
 # "auto": on postures never seen it verifies more than IPOPT alone, faster (2026-12-05,
 # in-process after each family's first call, 4 collision families x seeds 7 and 11 x 49
-# problems: 390 verified against 386, medians 14.9-25.0 ms against 16.9-31.1; the free
+# problems: 389 verified against 386, medians 14.9-25.0 ms against 16.9-31.1; the free
 # reach 5.4 against 6.3 ms); a posture neither verifies pays both calls (the stances' max
 # 521 against 271 ms). Sequences keep IPOPT (SEQUENCE_METHOD).
 DEFAULT_METHOD = "auto"
