@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -630,23 +629,6 @@ def test_the_model_counts_no_linearized_residue_below_the_qps_tolerance():
     d[1] = 10 * LINEAR_TOL
     charged = _model_reduction(it, Bs, d, bounds, 1e8)
     assert charged == pytest.approx(1e-3 - 0.5e-6 - 1e8 * 10 * LINEAR_TOL, rel=1e-6)
-
-
-def test_under_auto_each_solver_has_the_whole_call_budget(monkeypatch):
-    """``max_call_iter`` of a program run under auto (:func:`run_nlp`, as the diagnosis runs
-    it): the SQP's iterations are charged to its own budget, so IPOPT's run after a failed
-    SQP run may use all of it, as IPOPT alone would; under one solver, its runs share it."""
-    monkeypatch.delenv("POSTUREGEN_SOLVER", raising=False)
-    budget = runs_module.Budget.of(SolverOptions(max_call_iter=150, method="auto"))
-    budget.charge(SimpleNamespace(method="sqp", iterations=146))
-    assert budget.run_cap(400, "ipopt") == 150 and budget.run_cap(400, "sqp") == 25
-    budget.charge(SimpleNamespace(method="sqp", iterations=10))
-    assert not budget.left("sqp") and budget.left("ipopt") and budget.left()
-    budget.charge(SimpleNamespace(method="ipopt", iterations=150))
-    assert not budget.left()
-    alone = runs_module.Budget.of(SolverOptions(max_call_iter=150, method="ipopt"))
-    alone.charge(SimpleNamespace(method="ipopt", iterations=146))
-    assert alone.methods == ("ipopt",) and alone.run_cap(400, "ipopt") == 25
 
 
 def test_a_failed_auto_call_is_made_again_with_ipopt_alone(free_problems, monkeypatch):

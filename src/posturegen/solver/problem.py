@@ -52,10 +52,15 @@ DEFAULT_METHOD = "auto"
 SEQUENCE_METHOD = "ipopt"
 
 
+def _env_method() -> str:
+    """$POSTUREGEN_SOLVER, stripped ("" when unset)."""
+    return os.environ.get("POSTUREGEN_SOLVER", "").strip()
+
+
 def with_sequence_method(solver: dict[str, Any]) -> dict[str, Any]:
     """Solver options (a problem file's ``options.solver``) with SEQUENCE_METHOD, unless they
     or $POSTUREGEN_SOLVER already name a solver."""
-    if "method" in solver or os.environ.get("POSTUREGEN_SOLVER", "").strip():
+    if "method" in solver or _env_method():
         return dict(solver)
     return {**solver, "method": SEQUENCE_METHOD}
 
@@ -125,7 +130,7 @@ class SolverOptions:
         """The effective solver: ``method``, else $POSTUREGEN_SOLVER, else DEFAULT_METHOD."""
         if self.method is not None:
             return self.method
-        env = os.environ.get("POSTUREGEN_SOLVER", "").strip()
+        env = _env_method()
         if not env:
             return DEFAULT_METHOD
         if env not in METHODS:

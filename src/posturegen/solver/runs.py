@@ -1,7 +1,8 @@
 """One run of a solver on a :class:`~posturegen.solver.problem.Program`, whichever solver:
 the SQP core (:mod:`posturegen.solver.sqp`), IPOPT, or the SQP then IPOPT from the same
 start when the SQP fails (``SolverOptions.method``: ``auto``; :func:`~posturegen.solver.solve.
-solve` under ``auto`` makes the SQP's whole call first, then IPOPT's). A run starts from
+solve` under ``auto`` makes the SQP's whole call first, then IPOPT's, each with a budget of its
+own, so that a call's runs are of one solver). A run starts from
 given variables and multipliers (a warm start: the SQP's first QP working set is the
 multipliers' sign pattern, IPOPT's barrier starts small), is charged to the call's budget of
 iterations, and returns a :class:`Run`: its solution, multipliers and what it cost."""
@@ -19,7 +20,7 @@ import numpy as np
 from .._cache import BoundedCache, Ref
 from .buffered import Buffered
 from .compile import CACHE_SIZE, CompiledNLP, is_compiled
-from .problem import Program, SolverOptions
+from .problem import Program
 from .sqp.core import Bounds, SQPOptions, sqp
 from .sqp.oracle import Oracle
 from .starts import carried
@@ -30,46 +31,25 @@ _IPOPT_OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
 @dataclass
 class Budget:
     """The iterations one call of :func:`~posturegen.solver.solve.solve` may spend
-    (SolverOptions.max_call_iter) and has spent, per solver: each run is charged to its own.
-    Under ``auto`` (a program run by :func:`run_nlp` itself, as the diagnosis runs it;
-    ``solve`` makes the SQP's call, then IPOPT's) the SQP and IPOPT each have the whole
-    budget, so that the SQP's failures leave IPOPT all it would have had alone. Once a
-    solver's is spent, none of its runs starts. It keeps the call's SQP runs too: a run from
-    where one of them started is not made again (:class:`_Tried`)."""
+    (SolverOptions.max_call_iter) and has spent: each run is charged (SQP and IPOPT
+    iterations alike); once spent, no run starts. It keeps the call's SQP runs too: a run
+    from where one of them started is not made again (:class:`_Tried`)."""
 
     limit: int | None
-    methods: tuple[str, ...] = ("ipopt",)  # the solvers the call runs
-    spent: dict[str, int] = dataclasses.field(default_factory=dict)
+    spent: int = 0
     tried: list[_Tried] = dataclasses.field(default_factory=list)
 
-    @classmethod
-    def of(cls, options: SolverOptions) -> Budget:
-        """The budget of a call with these solver options."""
-        method = options.solver_method()
-        methods = ("sqp", "ipopt") if method == "auto" else (method,)
-        return cls(options.max_call_iter, methods)
+    def left(self) -> bool:
+        return self.limit is None or self.spent < self.limit
 
-    def left(self, method: str | None = None) -> bool:
-        """Whether a run of ``method`` (None: of any of the call's solvers) may start."""
-        if self.limit is None:
-            return True
-        methods = (method,) if method else self.methods
-        return any(self.spent.get(m, 0) < self.limit for m in methods)
-
-    def run_cap(self, max_iter: int, method: str) -> int:
-        """The next run's iteration limit: ``max_iter``, or what is left of ``method``'s budget
-        rounded up to a multiple of BUDGET_STEP when less (a few solver variants per
-        structure, not one per count), so that a solver spends at most the budget +
-        BUDGET_STEP - 1."""
+    def run_cap(self, max_iter: int) -> int:
+        """The next run's iteration limit: ``max_iter``, or what is left of the budget rounded
+        up to a multiple of BUDGET_STEP when less (a few solver variants per structure, not
+        one per count), so that a call spends at most its budget + BUDGET_STEP - 1."""
         if self.limit is None:
             return max_iter
-        left = max(self.limit - self.spent.get(method, 0), 1)
+        left = max(self.limit - self.spent, 1)
         return min(max_iter, -(-left // BUDGET_STEP) * BUDGET_STEP)
-
-    def charge(self, run: Run) -> Run:
-        """Count ``run``'s iterations against its solver's budget."""
-        self.spent[run.method] = self.spent.get(run.method, 0) + max(run.iterations, 0)
-        return run
 
 
 # [iterations] a run's limit under a call's budget: what is left, rounded up to this
@@ -79,10 +59,10 @@ BUDGET_STEP = 25
 BUDGET: ContextVar[Budget | None] = ContextVar("posturegen_call_budget", default=None)
 
 
-def budget_left(method: str | None = None) -> bool:
-    """True while the running call may start another run (of ``method``: None, any)."""
+def budget_left() -> bool:
+    """True while the running call may start another run."""
     budget = BUDGET.get()
-    return budget is None or budget.left(method)
+    return budget is None or budget.left()
 
 
 @dataclass
@@ -128,17 +108,16 @@ class _Start:
 
 def _start(
     program: Program,
-    method: str,
     x0: np.ndarray | None,
     lam_x0: np.ndarray | None,
     lam_g0: dict[str, np.ndarray] | None,
     joints0: np.ndarray | None,
     layout: dict[str, slice] | None,
 ) -> _Start:
-    """The program under ``method``'s budget in the call, compiled, with its start laid out."""
+    """The program under the call's budget, compiled, with its start laid out."""
     budget = BUDGET.get()
     options = program.solver_options
-    cap = options.max_iter if budget is None else budget.run_cap(options.max_iter, method)
+    cap = options.max_iter if budget is None else budget.run_cap(options.max_iter)
     if cap < options.max_iter:  # the call's budget ends within this run
         program = program.but(solver_options=dataclasses.replace(options, max_iter=cap))
     built_before = is_compiled(program)
@@ -178,13 +157,14 @@ def run_nlp(
     ``auto``, a failed SQP run is followed by IPOPT from the same start: both are returned,
     the last is the answer."""
     method = program.solver_options.solver_method()
-    args = (x0, lam_x0, lam_g0, joints0, layout)
-    if method == "ipopt" or method == "auto" and not budget_left("sqp"):
-        return [_charged(_ipopt(_start(program, "ipopt", *args)))]
-    first = _charged(_sqp_once(_start(program, "sqp", *args)))
-    if method == "sqp" or first.ok or not budget_left("ipopt"):
+    start = _start(program, x0, lam_x0, lam_g0, joints0, layout)
+    if method == "ipopt":
+        return [_charged(_ipopt(start))]
+    first = _charged(_sqp_once(start))
+    if method == "sqp" or first.ok or not budget_left():
         return [first]
-    return [first, _charged(_ipopt(_start(program, "ipopt", *args)))]
+    retry = _start(program, x0, lam_x0, lam_g0, joints0, layout)  # the budget left
+    return [first, _charged(_ipopt(retry))]
 
 
 # [scaled units: rad, m, N / robot weight] an SQP run whose start is within this of where a
@@ -252,7 +232,9 @@ def _sqp_once(start: _Start) -> Run:
 
 def _charged(run: Run) -> Run:
     budget = BUDGET.get()
-    return run if budget is None else budget.charge(run)
+    if budget is not None:
+        budget.spent += max(run.iterations, 0)
+    return run
 
 
 # IPOPT's call per solver, into preallocated arrays (posturegen.solver.buffered): its memory

@@ -207,7 +207,7 @@ def _using(problem: Problem, method: str) -> Problem:
 
 def _budgeted(problem: Problem, x0: np.ndarray | None, start: Solved | None) -> Result:
     """:func:`_solve` under a budget of its own (SolverOptions.max_call_iter)."""
-    token = BUDGET.set(Budget.of(problem.solver_options))
+    token = BUDGET.set(Budget(problem.solver_options.max_call_iter))
     try:
         return _solve(problem, x0, start)
     finally:
@@ -539,9 +539,8 @@ def _result(program: Program, runs: list[Run], margin: float | None = None) -> R
     message = _message(status, report, run.method)
     budget = BUDGET.get()
     if not success and budget is not None and not budget.left():
-        each = ", each solver's" if len(budget.methods) > 1 else ""
         message = (
-            f"the call's {budget.limit} iterations (options.solver.max_call_iter{each}) were "
+            f"the call's {budget.limit} iterations (options.solver.max_call_iter) were "
             f"spent: {message}"
         )
     iterations = sum(r.iterations for r in runs)
