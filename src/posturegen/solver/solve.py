@@ -11,7 +11,6 @@ import dataclasses
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -23,12 +22,13 @@ from ..collision.boxes import TIGHTEN_STEP
 from ..collision.rows import CollisionTerm
 from ..collision.separation import separated_start
 from ..collision.slots import Capacity
-from ..io.posture_file import add_solve_fields, posture_dict, write_posture
+from ..io.posture_file import add_solve_fields, posture_dict
 from ..terms.equilibrium import TORQUE_LIMITS
 from ..verify import VerifyReport, verify_posture
 from .buffered import Buffered
 from .compile import CACHE_SIZE, initial_guess, layout_of
 from .problem import Problem, Program, SolverOptions
+from .result import ContactForce, Result, after_failed, by_method_of, counted
 from .runs import (
     _IPOPT_OK,
     BUDGET,
@@ -41,64 +41,6 @@ from .runs import (
     run_nlp,
 )
 from .starts import START_MU_INIT, START_WARM_MU_INIT, Solved, carried, start_vector
-
-
-@dataclass(frozen=True)
-class ContactForce:
-    """A force on the robot [N] at a world point [m], applied to a point of ``frame``."""
-
-    frame: str
-    point: np.ndarray  # (3,) world [m]
-    force: np.ndarray  # (3,) world [N]
-
-
-@dataclass(frozen=True)
-class Result:
-    """A solved posture. ``success`` means the solver converged and the re-check passed."""
-
-    success: bool
-    status: str  # the solver's return status (IPOPT's names, the SQP's too)
-    message: str  # why it failed, or "verified"
-    iterations: int  # of every run of the call, SQP and IPOPT
-    solve_time_s: float  # the solvers' own wall time [s]
-    build_time_s: float  # time to build the solver (0 when it came from the cache) [s]
-    q: np.ndarray  # (nq,) Pinocchio order: base xyz, quaternion xyzw, joints
-    torques: np.ndarray  # (nj,) actuated joints, velocity order [N·m]
-    forces: dict[str, tuple[ContactForce, ...]]  # per contact name
-    cost: float
-    verification: VerifyReport
-    posture: dict[str, Any]  # the posture-file content
-    # why no posture was found, one line (posturegen.solver.diagnose.diagnose); "" when not
-    # diagnosed
-    diagnosis: str = ""
-    # the last IPOPT run's program: its constraint rows (its collision rows included) and
-    # whether it ran generated C (posturegen.solver.codegen)
-    constraint_rows: int = 0
-    generated_c: bool = False
-    # the last run's variables (n_x,) and their blocks: what starts another solve
-    # (solve(problem, start=result))
-    x: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
-    x_blocks: dict[str, slice] = dataclasses.field(default_factory=dict)
-    # and its multipliers: of the variables' bounds (n_x,), of each constraint block
-    lam_x: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
-    lam_g: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
-    # the solver of the last run ("sqp" or "ipopt", SolverOptions.method) and the iterations
-    # of each solver over the call's runs
-    method: str = "ipopt"
-    iterations_by_method: dict[str, int] = dataclasses.field(default_factory=dict)
-    verify_time_s: float = 0.0  # the re-check of the returned posture [s]
-    wall_time_s: float = 0.0  # the whole call: builds, runs, active-set rounds, re-checks [s]
-
-    @property
-    def max_violation(self) -> float:
-        """The worst re-check relative to its tolerance (<= 1: all passed; see
-        :attr:`VerifyReport.max_violation`)."""
-        return self.verification.max_violation
-
-    def write(self, path: str | Path) -> Path:
-        """Write the posture file (JSON)."""
-        return write_posture(path, self.posture)
-
 
 # Sphere pairs that entered the program of earlier problems of the same structure, and the
 # capacity of its collision rows: the next problem of that structure starts with them, so that
@@ -195,7 +137,7 @@ def solve(problem: Problem, x0: np.ndarray | None = None, start: Solved | None =
     else:  # the SQP's call, then IPOPT's from the same start when it fails
         result = _budgeted(_using(problem, "sqp"), x0, start)
         if not result.success and placed_blocked(Program.of(problem)) is None:
-            result = _after(result, _budgeted(_using(problem, "ipopt"), x0, start))
+            result = after_failed(result, _budgeted(_using(problem, "ipopt"), x0, start))
     return dataclasses.replace(result, wall_time_s=time.perf_counter() - t0)
 
 
@@ -214,26 +156,6 @@ def _budgeted(problem: Problem, x0: np.ndarray | None, start: Solved | None) -> 
         BUDGET.reset(token)
 
 
-def _after(failed: Result, alone: Result) -> Result:
-    """The answer of an ``auto`` call whose SQP call ``failed``: IPOPT's call (``alone``),
-    counted with every run of both."""
-    by_method = dict(failed.iterations_by_method)
-    for method, n in alone.iterations_by_method.items():
-        by_method[method] = by_method.get(method, 0) + n
-    runs = failed.posture.get("ipopt_runs", 0) + alone.posture.get("ipopt_runs", 0)
-    iterations = failed.iterations + alone.iterations
-    solve_time = failed.solve_time_s + alone.solve_time_s
-    alone.posture.update({"iterations": iterations, "solve_time_s": solve_time, "ipopt_runs": runs})
-    return dataclasses.replace(
-        alone,
-        iterations=iterations,
-        solve_time_s=solve_time,
-        build_time_s=failed.build_time_s + alone.build_time_s,
-        iterations_by_method=by_method,
-        verify_time_s=failed.verify_time_s + alone.verify_time_s,
-    )
-
-
 def _solve(problem: Problem, x0: np.ndarray | None, start: Solved | None) -> Result:
     """:func:`solve` within its call's budget."""
     x_start = None if x0 is None else np.asarray(x0, dtype=float)
@@ -250,9 +172,9 @@ def _solve(problem: Problem, x0: np.ndarray | None, start: Solved | None) -> Res
     relaxed = program.but(torque_limit_scale=program.torque_limit_scale * TORQUE_CONTINUATION)
     _, relaxed_runs = _solve_continued(relaxed, x_start, runs)
     if relaxed_runs[-1].status not in _IPOPT_OK:
-        return _counted(result, relaxed_runs)
+        return counted(result, relaxed_runs)
     retry, retry_runs = _solve_continued(program, relaxed_runs[-1].x, relaxed_runs)
-    return retry if retry.success else _counted(result, retry_runs)
+    return retry if retry.success else counted(result, retry_runs)
 
 
 def _torque_limits_bound(runs: list[Run]) -> bool:
@@ -268,28 +190,6 @@ def _torque_limits_bound(runs: list[Run]) -> bool:
         if rows is not None and run.rows_bound[rows].any():
             return True
     return False
-
-
-def _counted(result: Result, runs: list[Run]) -> Result:
-    """``result`` with the iterations and times of every run of the call (those of the
-    continuations that did not succeed too), in its posture's fields as well."""
-    iterations = sum(r.iterations for r in runs)
-    solve_time = sum(r.solve_time_s for r in runs)
-    result.posture.update(
-        {"iterations": iterations, "solve_time_s": solve_time, "ipopt_runs": len(runs)}
-    )
-    return dataclasses.replace(
-        result,
-        iterations=iterations,
-        solve_time_s=solve_time,
-        build_time_s=sum(r.build_time_s for r in runs),
-        iterations_by_method=_by_method(runs),
-    )
-
-
-def _by_method(runs: list[Run]) -> dict[str, int]:
-    """Iterations of the runs per solver method."""
-    return {m: sum(r.iterations for r in runs if r.method == m) for m in {r.method for r in runs}}
 
 
 # the outputs' call per function, into preallocated arrays (posturegen.solver.buffered)
@@ -339,7 +239,7 @@ def _solve_continued(
         return result, runs
     relaxed = run_nlp(_without_rows(program), x_start)
     if not relaxed[-1].ok:
-        return _counted(result, [*runs, *relaxed]), [*runs, *relaxed]
+        return counted(result, [*runs, *relaxed]), [*runs, *relaxed]
     return _solve_avoiding(program, relaxed[-1].x, [*runs, *relaxed])
 
 
@@ -573,7 +473,7 @@ def _result(program: Program, runs: list[Run], margin: float | None = None) -> R
         lam_x=np.zeros(0) if run.lam_x is None else run.lam_x,
         lam_g=per_block(run),
         method=run.method,
-        iterations_by_method=_by_method(runs),
+        iterations_by_method=by_method_of(runs),
         verify_time_s=verify_time,
     )
 
