@@ -580,9 +580,10 @@ def test_theta_max_is_the_largest_share_of_the_violations_the_region_allows(back
     )
     options = SQPOptions(qp=backend)
     assert registry.solve(qp, backend).status == "infeasible"
-    assert _theta_max(qp, options) == pytest.approx(1 / 15, abs=1e-7)
+    assert _theta_max(qp, options, qp.lbA > 0, qp.ubA < 0) == pytest.approx(1 / 15, abs=1e-7)
     wider = dataclasses.replace(qp, ubA=np.array([inf, -0.5, 0.4, 10.0]))
-    assert _theta_max(wider, options) == pytest.approx(0.2, abs=1e-7)  # the region's
+    # the region's bound
+    assert _theta_max(wider, options, wider.lbA > 0, wider.ubA < 0) == pytest.approx(0.2, abs=1e-7)
     run = SQPRun(np.zeros(3), 0.0, np.zeros(4), np.zeros(3), "", 0, 0, None, 0.0)
     run.rows_bound = np.zeros(4, dtype=bool)
     sol = _relaxed(qp, options, run)

@@ -418,7 +418,7 @@ def _relaxed(qp: QP, options: SQPOptions, run: SQPRun) -> QPSolution:
     run.rows_bound |= _reachable(qp)  # any of them may be why it has no solution
     lower, upper = qp.lbA > 0, qp.ubA < 0  # rows violated at d = 0
     run.relaxed_qps += 1
-    top = _theta_max(qp, options)
+    top = _theta_max(qp, options, lower, upper)
     thetas = THETAS
     if top is not None:
         first = THETA_SHARE * top
@@ -436,16 +436,16 @@ def _relaxed(qp: QP, options: SQPOptions, run: SQPRun) -> QPSolution:
     return sol
 
 
-def _theta_max(qp: QP, options: SQPOptions) -> float | None:
+def _theta_max(qp: QP, options: SQPOptions, lower: np.ndarray, upper: np.ndarray) -> float | None:
     """The largest θ in [0, 1] for which the violated rows asking for θ of their correction
     (lbA θ <= A d or A d <= ubA θ) hold with d in the region: the QP over (d, θ)
 
         min ½ ‖d̃‖² + ½ θ² - W θ  s.t.  the rows, their violated bounds × θ, 0 <= θ <= 1
 
     (a violated row's other bound kept at its distance, which θ <= 1 allows). None when the
-    backend finds none (d = 0, θ = 0 is one; the ladder of THETAS then decides)."""
+    backend finds none (d = 0, θ = 0 is one; the ladder of THETAS then decides). ``lower``,
+    ``upper`` (m,): the rows whose lower (upper) bound d = 0 violates."""
     n = qp.c.size
-    lower, upper = qp.lbA > 0, qp.ubA < 0
     violated = np.where(lower, qp.lbA, np.where(upper, qp.ubA, 0.0))  # (m,)
     with np.errstate(invalid="ignore"):  # inf - inf where a row has no other bound
         lbA = np.where(lower, 0.0, np.where(upper, qp.lbA - qp.ubA, qp.lbA))

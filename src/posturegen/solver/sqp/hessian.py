@@ -108,14 +108,14 @@ def convexified(
         blocks = _blocks(lifted, held, delta)
         if blocks is not None:
             return blocks[0], True, blocks[1]
-    w, V = np.linalg.eigh(Hs)
-    return (V * np.clip(np.abs(w), delta, CURVATURE_MAX)) @ V.T, True, none
+    return _clipped(Hs, delta, flip=True), True, none
 
 
-def _clipped(M: np.ndarray, delta: float) -> np.ndarray:
-    """M with its eigenvalues clipped to [δ, CURVATURE_MAX]."""
+def _clipped(M: np.ndarray, delta: float, flip: bool = False) -> np.ndarray:
+    """M with its eigenvalues clipped to [δ, CURVATURE_MAX] (their magnitudes when ``flip``:
+    a negative one flipped, not raised to δ)."""
     w, V = np.linalg.eigh(M)
-    return (V * np.clip(w, delta, CURVATURE_MAX)) @ V.T
+    return (V * np.clip(np.abs(w) if flip else w, delta, CURVATURE_MAX)) @ V.T
 
 
 def _blocks(
