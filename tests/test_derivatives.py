@@ -44,7 +44,8 @@ FLOATING = {
 
 
 # a support foot on a 2.5 cm rung: the scaled plane of sec. IV-F, whose CoP-margin row bounds
-# the smallest eigenvalue of BᵀB (posturegen.terms.cop); the other foot fixed (polygon CoP rows)
+# the smallest eigenvalue of BᵀB (posturegen.terms.cop); the other foot fixed (polygon CoP rows);
+# both with a grip (posturegen.terms.forces: the forces moved by it, as a hand's on a rail)
 THIN = {
     "robot": "talos",
     "surfaces": [
@@ -56,8 +57,20 @@ THIN = {
         },
     ],
     "contacts": [
-        {"robot_patch": "left_sole", "surface": "ground", "type": "fixed", "position": [0, 0.1]},
-        {"robot_patch": "right_sole", "surface": "rung", "type": "support", "points": 6},
+        {
+            "robot_patch": "left_sole",
+            "surface": "ground",
+            "type": "fixed",
+            "position": [0, 0.1],
+            "grip": 80.0,
+        },
+        {
+            "robot_patch": "right_sole",
+            "surface": "rung",
+            "type": "support",
+            "points": 6,
+            "grip": 40.0,
+        },
     ],
     "options": {"cop_margin": 0.004},
 }
@@ -76,6 +89,8 @@ def program(request):
     else:
         problem = load_problem(_demo_dir() / "stand-reach.yaml")
     compiled = problem.compile()
+    if request.param == "thin":
+        assert {"contact.left_sole.grip", "contact.right_sole.grip"} <= set(compiled.p_index)
     x0, p, _, _ = problem.numeric(compiled)
     return compiled, x0, p
 

@@ -24,10 +24,11 @@ from posturegen.planner.command import write_figures
 from posturegen.planner.heuristic import FOCAL, STEP_COST, Heuristic
 from posturegen.planner.layout import HEADROOM, Region, pick_target, regions
 from posturegen.planner.node import FREE, Action, Node, place_of
-from posturegen.planner.rules import is_hand, patch_positions
+from posturegen.planner.rules import is_hand
 from posturegen.planner.search import REVISIT, Search, _Entry
 from posturegen.planner.solver import RoundSolver
 from posturegen.verify import verify_posture
+from tests.plan_checks import assert_exact_unloads
 
 PATCHES = ["left_sole", "right_sole", "left_hand", "right_hand"]
 SURFACES = ["ground", "step1", "step2"]
@@ -61,18 +62,7 @@ def test_stairs_plan_reaches_the_top_with_every_stage_verified(tmp_path):
     # every removal unloaded exactly: the patch within 1 mm of where the stance before held
     # it, bearing nothing
     assert summary["unloads"] >= 1
-    stages = index["stages"]
-    unloads = [k for k, s in enumerate(stages) if s["name"].startswith("unload")]
-    assert unloads
-    for k in unloads:
-        posture = json.loads((tmp_path / stages[k]["posture"]).read_text())
-        before = json.loads((tmp_path / stages[k - 1]["posture"]).read_text())
-        (held,) = [c for c in posture["contacts"] if c.get("unloaded")]
-        assert held["forces"] == []
-        patch = held["robot_patch"]["name"]
-        now = patch_positions(robot, np.array(posture["q"]))[patch]
-        was = patch_positions(robot, np.array(before["q"]))[patch]
-        assert np.linalg.norm(now - was) <= 1e-3, (stages[k]["name"], now, was)
+    assert_exact_unloads(tmp_path, index["stages"], robot)
     # where the time went: the parts add up to the whole; with one worker the postures'
     # solver, build and re-check times fit in the rounds' wall time
     t = summary["time"]

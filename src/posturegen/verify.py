@@ -9,8 +9,10 @@ FILE`` and :func:`posturegen.solver.solve.solve` run exactly the same checks:
 - contact geometry: each robot patch lies in its surface plane with opposite normals, a fixed
   contact sits at its given pose, a floating one within its yaw range, each force point lies in
   both polygons, each ellipse lies in both polygons;
-- friction: each force inside its exact cone |f_t| <= μ f_n (f_n >= 0);
-- centre of pressure: at least the contact's ``cop_margin`` inside its contact region;
+- friction: each force inside its exact cone |f_t| <= μ f_n (f_n >= 0); with a contact's
+  ``grip`` G [N] shared by its k points, |f_t| <= μ (f_n + G/k) (f_n >= -G/k);
+- centre of pressure: at least the contact's ``cop_margin`` inside its contact region (of the
+  pressures f_n + G/k with a grip);
 - tasks: each hard target reached.
 """
 
@@ -240,8 +242,9 @@ def _check_forces(
     )
     fn = f_w @ n  # (k,) [N]
     ft = np.linalg.norm(f_w - np.outer(fn, n), axis=1)
-    worst.friction = max(worst.friction, float(np.max(ft - mu * fn)) / weight)
-    worst.friction = max(worst.friction, float(np.max(-fn)) / weight)
+    pressed = fn + grip_per_point(contact)  # (k,) [N] the load and the hand's grip
+    worst.friction = max(worst.friction, float(np.max(ft - mu * pressed)) / weight)
+    worst.friction = max(worst.friction, float(np.max(-pressed)) / weight)
     # generalized forces Σ Jᵀ f at p: J the point's LOCAL_WORLD_ALIGNED Jacobian, per joint
     joints = np.array([model.frames[model.getFrameId(x["frame"])].parentJoint for x in forces])
     for jid in np.unique(joints):
@@ -355,6 +358,14 @@ def _ellipse_outside(
     return out
 
 
+def grip_per_point(contact: dict[str, Any]) -> float:
+    """[N] the grip of a hand closed around the surface, per force point: it presses each
+    point beyond the load (posturegen.terms.forces); 0 for a contact without grip."""
+    forces = contact.get("forces") or []
+    grip = float(contact.get("grip") or 0.0)
+    return grip / len(forces) if forces else 0.0
+
+
 def cop_shortfall(
     contact: dict[str, Any],
     T_ws: pin.SE3,
@@ -374,6 +385,7 @@ def cop_shortfall(
         return 0.0
     points = points_in_plane(T_ws, np.array([f["point"] for f in forces], dtype=float))[:, :2]
     fn = np.array([f["force"] for f in forces], dtype=float) @ T_ws.rotation[:, 2]  # (k,) [N]
+    fn = fn + grip_per_point(contact)  # the pressure, with a hand's grip
     total = float(fn.sum())
     if total <= 0.0:
         return 0.0

@@ -197,6 +197,11 @@ TOE_CLEARANCE = 0.04  # [m]
 RAIL_TILT = math.radians(75.0)
 RAIL_CLEARANCE = 0.2  # [m]
 LADDER_GAP = 0.255  # [m] from the toes at the start to step 1's front edge
+# [N] a hand closed around a rail presses it this much beyond its load (posturegen.terms.forces:
+# it may pull by that much, and its friction grows with it). Open (a palm on the rail's face,
+# μ 0.7), HRP-2 could not take its lower foot off step 1 with its upper foot on step 2 and both
+# hands on the rails: beyond its torque limits (verified at 3x them), and at grip 100 N
+RAIL_GRIP = 150.0
 
 
 def _rail_rpy(alpha: float, inward: float) -> tuple[float, float, float]:
@@ -242,7 +247,7 @@ def _inclined_stages(
     # rail with an ellipse at least 3 cm across (the rail is 5 cm wide)
     foothold = {"min_radii": [0.4 * depth, 0.4 * depth]}
     geo = {"type": "geometric", **foothold}
-    grip = {"type": "support", "min_radii": [0.015, 0.015]}
+    grip = {"type": "support", "min_radii": [0.015, 0.015], "grip": RAIL_GRIP}
     return [
         {"name": "stand", "contacts": _feet_on_ground(half_width=size.stance_half_width)},
         {

@@ -120,8 +120,11 @@ def _kept(
             f"keep one of: {', '.join(x.name for x in previous.contacts)}",
         )
     position, yaw = frozen_pose(old, previous.robot.model, q_prev)
-    out = {k: v for k, v in c.items() if k in ("name", "mu", "friction", "cop_margin", "unloaded")}
+    carried = ("name", "mu", "friction", "cop_margin", "unloaded", "grip")
+    out = {k: v for k, v in c.items() if k in carried}
     out.setdefault("mu", float(old.mu))  # a kept contact keeps its friction coefficient
+    if getattr(old, "grip", 0.0) > 0:  # and a hand's grip
+        out.setdefault("grip", float(old.grip))
     if hasattr(old, "cop_margin"):  # and its CoP margin (else the stage's options give it)
         out.setdefault("cop_margin", float(old.cop_margin))
     out.update(

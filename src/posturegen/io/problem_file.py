@@ -118,7 +118,8 @@ def _contact(
     fric = _friction(c["friction"], f"{fld}.friction") if "friction" in c else friction
     yr = _yaw_range(c, fld)
     cop = F.number(c.get("cop_margin", cop_margin), f"{fld}.cop_margin", minimum=0.0)
-    return cls.read(c, fld, ContactEntry(name, patch, surface, mu_c, fric, yr, cop))
+    grip = F.number(c.get("grip", 0.0), f"{fld}.grip", minimum=0.0)
+    return cls.read(c, fld, ContactEntry(name, patch, surface, mu_c, fric, yr, cop, grip))
 
 
 def _tasks(value: Any, robot: Robot, contacts: list[Any]) -> list[Task]:

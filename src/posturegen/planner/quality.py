@@ -1,7 +1,8 @@
 """Contact quality along a sequence, from its posture files: the size of each loaded
 contact's region (inradius of the intersection of the patch and the surface at the realized
 pose, or the ellipse's smaller radius when it has one) and how deep its centre of pressure is
-inside it (paper sec. IV-D: the larger, the more robust)."""
+inside it (paper sec. IV-D: the larger, the more robust; of the pressures with a hand's grip,
+as posturegen.verify checks it)."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import pinocchio as pin
 import shapely
 
 from ..model.robot import Robot, load_robot
+from ..verify import grip_per_point
 
 LOADED = 0.05  # a contact bearing at least this share of the total normal force counts
 
@@ -61,12 +63,13 @@ def contact_quality(posture: Mapping[str, Any], frames: Mapping[str, np.ndarray]
             continue
         T_ws = np.array(c["surface"]["placement"], dtype=float)
         n = T_ws[:3, 2]
-        fn = np.array([f["force"] for f in forces], dtype=float) @ n
+        fn = np.array([f["force"] for f in forces], dtype=float) @ n  # (k,) [N] the load
         totals.append(float(fn.sum()))
+        pressed = fn + grip_per_point(c)  # (k,) [N] with a hand's grip: its pressure
         T_wc = frames[c["robot_patch"]["frame"]] @ np.array(c["robot_patch"]["placement"])
         region = _region(c, T_ws, T_wc)
         pts = _in_plane(T_ws, np.array([f["point"] for f in forces], dtype=float))[:, :2]
-        cop = fn @ pts / max(float(fn.sum()), 1e-12)
+        cop = pressed @ pts / max(float(pressed.sum()), 1e-12)
         depth = region.exterior.distance(shapely.Point(*cop))
         if not region.contains(shapely.Point(*cop)):
             depth = -depth

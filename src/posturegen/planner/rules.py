@@ -13,6 +13,7 @@ Format (YAML or a dict; every key optional, defaults per robot from :func:`defau
         reach: 0.6                       # [m] new contact to the nearest sole in contact
         contact: {min_radii: [0.02, 0.02], maximize_area: 10.0, yaw_range: [-0.6, 0.6]}
         mu: 0.7                          # friction once the contact is fixed
+        grip: 0.0                        # [N] a hand closed around the surface, once fixed
 """
 
 from __future__ import annotations
@@ -47,12 +48,14 @@ CONTACT_KEYS = ("min_radii", "min_area", "maximize_area", "yaw_range", "formulat
 @dataclass(frozen=True)
 class PatchRule:
     """Where one robot patch may go: surface name patterns, the reach [m] from the nearest
-    sole in contact, the options of its geometric (touch) contact, its μ once fixed."""
+    sole in contact, the options of its geometric (touch) contact, its μ and grip [N] once
+    fixed (posturegen.terms.forces)."""
 
     surfaces: tuple[str, ...]
     reach: float
     contact: Mapping[str, Any] = field(default_factory=dict)
     mu: float | None = None
+    grip: float = 0.0  # [N]
 
     def allows(self, surface: str) -> bool:
         """The surface matches one of the patterns."""
@@ -88,6 +91,7 @@ class Rules:
                     "reach": r.reach,
                     "contact": copy.deepcopy(dict(r.contact)),
                     **({"mu": r.mu} if r.mu is not None else {}),
+                    **({"grip": r.grip} if r.grip > 0 else {}),
                 }
                 for p, r in self.patches.items()
             },
@@ -127,7 +131,7 @@ def default_rules(robot: Robot, surfaces: Iterable[str], hands: bool = False) ->
 
 def _patch_rule(value: Any, fld: str, base: PatchRule | None) -> PatchRule:
     v = F.require_mapping(value, fld)
-    F.check_keys(v, fld, [], ["surfaces", "reach", "contact", "mu"])
+    F.check_keys(v, fld, [], ["surfaces", "reach", "contact", "mu", "grip"])
     if base is None:
         base = PatchRule(("*",), 1.0, {})
     surfaces = base.surfaces
@@ -147,7 +151,8 @@ def _patch_rule(value: Any, fld: str, base: PatchRule | None) -> PatchRule:
     mu = base.mu
     if v.get("mu") is not None:
         mu = F.number(v["mu"], f"{fld}.mu", positive=True)
-    return PatchRule(surfaces, reach, contact, mu)
+    grip = F.number(v.get("grip", base.grip), f"{fld}.grip", minimum=0.0)
+    return PatchRule(surfaces, reach, contact, mu, grip)
 
 
 def _count(v: Mapping[str, Any], key: str, default: int) -> int:

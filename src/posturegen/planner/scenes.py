@@ -62,14 +62,15 @@ def default_goal(seq: Mapping[str, Any]) -> dict[str, Any]:
     }
 
 
-def _options(contacts: list[dict[str, Any]], hand: bool) -> tuple[dict[str, Any], float | None]:
-    """The contact options (and μ) of the last placed contact of a sole or of a hand."""
+def _options(contacts: list[dict[str, Any]], hand: bool) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The contact options, and μ and grip (those it sets), of the last placed contact of a
+    sole or of a hand."""
     same = [c for c in contacts if is_hand(c["robot_patch"]) == hand and c["surface"] != "ground"]
     if not same:
-        return {}, None
+        return {}, {}
     last = same[-1]
-    mu = last.get("mu")
-    return {k: copy.deepcopy(last[k]) for k in CONTACT_KEYS if k in last}, mu
+    fixed = {k: last[k] for k in ("mu", "grip") if last.get(k) is not None}
+    return {k: copy.deepcopy(last[k]) for k in CONTACT_KEYS if k in last}, fixed
 
 
 def scene_rules(name: str, seq: Mapping[str, Any], robot: Robot) -> Rules:
@@ -81,11 +82,12 @@ def scene_rules(name: str, seq: Mapping[str, Any], robot: Robot) -> Rules:
     patches: dict[str, PatchRule] = {}
     for p, rule in base.patches.items():
         hand = is_hand(p)
-        options, mu = _options(placed, hand)
+        options, fixed = _options(placed, hand)
         patches[p] = replace(
             rule,
             surfaces=info.hands if hand else info.soles,
             contact={**dict(rule.contact), **options},
-            mu=mu if mu is not None else rule.mu,
+            mu=fixed.get("mu", rule.mu),
+            grip=fixed.get("grip", rule.grip),
         )
     return replace(base, patches=patches)

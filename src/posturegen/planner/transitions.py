@@ -34,10 +34,12 @@ GUIDE_WEIGHT = 1.0  # soft task weight·|p - target|²/(0.1 m)² pulling a new c
 EXACT_UNLOAD_ITER = 300
 
 
-def _keep(name: str, mu: float | None = None) -> dict[str, Any]:
+def _keep(name: str, mu: float | None = None, grip: float = 0.0) -> dict[str, Any]:
     out: dict[str, Any] = {"name": name, "type": "keep"}
     if mu is not None:
         out["mu"] = mu
+    if grip > 0:
+        out["grip"] = grip
     return out
 
 
@@ -105,7 +107,7 @@ def hold_stage(
         "name": action.label(),
         "contacts": [
             *(_keep(n) for n in node.contacts.values()),
-            _keep(action.patch, rules.patches[action.patch].mu),
+            _keep(action.patch, rules.patches[action.patch].mu, rules.patches[action.patch].grip),
         ],
         "tasks": goal_tasks(goal),
     }

@@ -68,7 +68,7 @@ class PlacedContact:
 @dataclass(frozen=True)
 class ContactEntry:
     """What every contact type reads from its problem-file entry (validated by the reader):
-    its name, patch, surface, friction coefficient and model, yaw bounds and CoP margin."""
+    its name, patch, surface, friction coefficient and model, yaw bounds, CoP margin and grip."""
 
     name: str
     patch: Patch
@@ -77,6 +77,7 @@ class ContactEntry:
     friction: FrictionModel
     yaw_range: tuple[float, float] | None
     cop_margin: float  # [m]
+    grip: float = 0.0  # [N] (posturegen.terms.forces)
 
 
 class Contact(Term):

@@ -17,7 +17,7 @@ from ...model.geometry import intersect
 from ...model.robot import Patch
 from ...model.scene import Surface
 from ..cop import DEFAULT_COP_MARGIN, check_polygon_margin, declare_polygon_cop, polygon_depths
-from ..forces import declare_forces, force_guess, forces_dict
+from ..forces import declare_forces, force_guess, forces_dict, grip_parameter
 from ..friction import FrictionModel
 from ..nlp import BuildContext, Instance
 from . import values as V
@@ -41,7 +41,8 @@ class FixedContact(Contact):
     trace(E) >= 0 (the equalities alone also admit the rotations by π about x, y or z, of
     trace -1), with ``T_t = T_world_surface·T_surface_patch`` the target. Forces: one
     f = W·R_s·φ per point, φ_n >= 0 and the friction model on φ, W the robot's weight; the
-    centre of pressure ``cop_margin`` [m] inside the intersection (:mod:`posturegen.terms.cop`).
+    centre of pressure ``cop_margin`` [m] inside the intersection (:mod:`posturegen.terms.cop`);
+    ``grip`` [N]: a hand closed around the surface (:mod:`posturegen.terms.forces`).
 
     ``unloaded``: the patch kept exactly where it is, bearing nothing (the pose rows only, no
     force variable): a contact about to be removed, while the others bear the weight.
@@ -57,6 +58,7 @@ class FixedContact(Contact):
     type: str = "fixed"
     cop_margin: float = field(default=DEFAULT_COP_MARGIN, kw_only=True)  # [m]
     unloaded: bool = field(default=False, kw_only=True)
+    grip: float = field(default=0.0, kw_only=True)  # [N]
 
     kind: ClassVar[str] = "fixed"
     keys: ClassVar[Mapping[str, V.Schema]] = {
@@ -66,6 +68,7 @@ class FixedContact(Contact):
         "friction": V.FRICTION,
         "cop_margin": V.COP_MARGIN,
         "unloaded": V.UNLOADED,
+        "grip": V.GRIP,
     }
     fixed_in_place: ClassVar[bool] = True
 
@@ -102,7 +105,8 @@ class FixedContact(Contact):
         if self.unloaded:
             return ("fixed", self.name, self.patch.name, "unloaded")
         cop = self.cop_margin > 0
-        return ("fixed", self.name, self.patch.name, self.n_points, self.friction, cop)
+        grip = self.grip > 0
+        return ("fixed", self.name, self.patch.name, self.n_points, self.friction, cop, grip)
 
     def declare(self, ctx: BuildContext) -> None:
         nlp, k = ctx.nlp, self.n_points
@@ -121,7 +125,9 @@ class FixedContact(Contact):
         R_j, p_j = ctx.state.R[self.patch.joint_id], ctx.state.p[self.patch.joint_id]
         points = [p_j + R_j @ pts[:, i] for i in range(k)]
         Rs = ca.reshape(nlp.parameter(f"{pre}.R_surface", 9), 3, 3)
-        phi_n = declare_forces(ctx, pre, self.patch.joint_id, points, self.friction, Rs)
+        phi_n = declare_forces(
+            ctx, pre, self.patch.joint_id, points, self.friction, Rs, self.grip > 0
+        )
         if self.cop_margin > 0:
             declare_polygon_cop(nlp, pre, phi_n, self.area.n)
 
@@ -139,6 +145,8 @@ class FixedContact(Contact):
             f"{pre}.mu": np.array([self.mu]),
             f"{pre}.points_joint": self.points_joint.T,
         }
+        if self.grip > 0:
+            out[f"{pre}.grip"] = grip_parameter(self.grip, problem.robot.weight, self.n_points)
         if self.cop_margin > 0:
             out[f"{pre}.cop_depths"] = polygon_depths(self.area, self.area.vertices)
             out[f"{pre}.cop_margin"] = np.array([self.cop_margin])
@@ -153,6 +161,8 @@ class FixedContact(Contact):
         out = self._base_dict()
         out["pose"] = {"position": self.position.tolist(), "yaw": self.yaw}
         out["cop_margin"] = self.cop_margin
+        if self.grip > 0:
+            out["grip"] = self.grip
         if self.unloaded:
             out["unloaded"] = True  # "forces": [] (bearing nothing)
             return out
@@ -187,6 +197,7 @@ class FixedContact(Contact):
                 k.friction,
                 cop_margin=k.cop_margin,
                 unloaded=unloaded,
+                grip=k.grip,
             )
         except InputError as exc:
             raise InputError(

@@ -15,7 +15,7 @@ from ...model.robot import Patch
 from ...model.scene import Surface
 from ..cop import DEFAULT_COP_MARGIN, declare_ellipse_cop, kappa_guess
 from ..ellipse_options import EllipseOptions
-from ..forces import declare_forces, force_guess, forces_dict
+from ..forces import declare_forces, force_guess, forces_dict, grip_parameter
 from ..friction import FrictionModel
 from ..nlp import BuildContext, Instance
 from . import values as V
@@ -39,6 +39,7 @@ class SupportContact(EllipseContact):
     friction: FrictionModel = field(default_factory=FrictionModel)
     type: str = "support"
     cop_margin: float = field(default=DEFAULT_COP_MARGIN, kw_only=True)  # [m]
+    grip: float = field(default=0.0, kw_only=True)  # [N] (posturegen.terms.forces)
 
     kind: ClassVar[str] = "support"
     keys: ClassVar[Mapping[str, V.Schema]] = {
@@ -48,6 +49,7 @@ class SupportContact(EllipseContact):
         "friction": V.FRICTION,
         "yaw_range": V.YAW_RANGE,
         "cop_margin": V.COP_MARGIN,
+        "grip": V.GRIP,
     }
 
     def __post_init__(self) -> None:
@@ -69,6 +71,7 @@ class SupportContact(EllipseContact):
             self.points,
             self.friction,
             self.cop_margin > 0,
+            self.grip > 0,
             *self._plane_key(),
         )
 
@@ -84,7 +87,9 @@ class SupportContact(EllipseContact):
             q2 = Sinv @ ca.vertcat(e[0] + c * lx - s * ly, e[1] + s * lx + c * ly)
             points.append(ps + Rs @ ca.vertcat(q2, 0))
         pre = f"contact.{self.name}"
-        phi_n = declare_forces(ctx, pre, self.patch.joint_id, points, self.friction, Rs)
+        phi_n = declare_forces(
+            ctx, pre, self.patch.joint_id, points, self.friction, Rs, self.grip > 0
+        )
         if self.cop_margin > 0:
             t = 2 * np.pi * np.arange(self.points) / self.points
             radii = None if self.scaled else e[3:5]
@@ -96,6 +101,9 @@ class SupportContact(EllipseContact):
             **self._ellipse_parameters(),
             f"contact.{self.name}.mu": np.array([self.mu]),
         }
+        if self.grip > 0:
+            weight = problem.robot.weight
+            out[f"contact.{self.name}.grip"] = grip_parameter(self.grip, weight, self.points)
         if self.cop_margin > 0:
             out[f"contact.{self.name}.cop_margin"] = np.array([self.cop_margin])
         return out
@@ -115,6 +123,8 @@ class SupportContact(EllipseContact):
         out["ellipse"] = self._ellipse_dict(outputs)
         out["forces"] = forces_dict(self.patch.frame, outputs, f"contact.{self.name}")
         out["cop_margin"] = self.cop_margin
+        if self.grip > 0:
+            out["grip"] = self.grip
         return out
 
     @classmethod
@@ -132,4 +142,5 @@ class SupportContact(EllipseContact):
             k.friction,
             yaw_range=k.yaw_range,
             cop_margin=k.cop_margin,
+            grip=k.grip,
         )

@@ -42,6 +42,12 @@ COP_MARGIN: Schema = {
     "minimum": 0,
     "description": "the centre of pressure this far inside the loaded region [m]",
 }
+GRIP: Schema = {
+    "type": "number",
+    "minimum": 0,
+    "description": "the force a hand closed around the surface adds to its friction and lets it "
+    "pull with, shared by its force points [N]",
+}
 UNLOADED: Schema = {"type": "boolean", "description": "the patch held in place, bearing nothing"}
 YAW_RANGE = pair("the patch's yaw bounds about the surface normal (min, max) [rad]")
 POINT = pair("the point of the patch that touches (x, y), patch frame [m]")
