@@ -13,7 +13,7 @@ import casadi as ca
 import numpy as np
 import pytest
 import yaml
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from posturegen.cli import _demo_dir, main
@@ -198,17 +198,21 @@ def test_rejected_posture_names_the_failed_checks():
 @settings(max_examples=60, deadline=None)
 @given(
     ft=st.tuples(*[st.floats(-3.0, 3.0, allow_nan=False)] * 2),
-    fn=st.floats(0.05, 3.0),
+    fn=st.floats(-1.0, 3.0),
     faces=st.integers(3, 12),
     cone=st.booleans(),
+    grip=st.sampled_from([0.0, 0.5, 2.0]),
 )
-def test_required_mu_is_the_least_that_holds_the_force(ft, fn, faces, cone):
+def test_required_mu_is_the_least_that_holds_the_force(ft, fn, faces, cone, grip):
+    """With a grip, the cone holds the force pressed by it (ψ = f + grip·n, the forces' rows)."""
+    assume(fn + grip >= 0.05)  # else a pull beyond the grip: no μ holds it (checked below)
     model = FrictionModel("cone") if cone else FrictionModel("pyramid", faces)
-    f = np.array([*ft, fn])
-    mu = required_mu(f, model)
-    assert np.array(model.constraints(ca.DM(f), mu)).max() <= 1e-9 * (1 + mu)  # holds at mu
+    psi = np.array([*ft, fn + grip])
+    mu = required_mu(np.array([*ft, fn]), model, grip)
+    assert np.array(model.constraints(ca.DM(psi), mu)).max() <= 1e-9 * (1 + mu)  # holds at mu
     if mu > 1e-6:  # and not below it
-        assert np.array(model.constraints(ca.DM(f), 0.99 * mu)).max() > 0
+        assert np.array(model.constraints(ca.DM(psi), 0.99 * mu)).max() > 0
+    assert required_mu(np.array([*ft, -grip - 0.1]), model, grip) == np.inf
 
 
 def test_categories_of_the_blocks():

@@ -441,22 +441,28 @@ def _friction_causes(r: Relaxed) -> Iterator[Cause]:
         if s is None or np.abs(s).max() <= TOL_FORCE:
             continue
         forces = r.outputs[f"{pre}.forces"].reshape(3, -1, order="F").T  # (k, 3) world [N]
-        need = required_mu(forces.sum(axis=0) @ c.surface.T_world_surface.rotation, c.friction)
-        text = f"friction at contact '{c.name}' needs μ >= {need:.2g} (μ = {c.mu:.2g})"
+        grip = float(getattr(c, "grip", 0.0))  # [N] a hand's (posturegen.terms.forces)
+        f = forces.sum(axis=0) @ c.surface.T_world_surface.rotation
+        need = required_mu(f, c.friction, grip)
+        held = f"μ = {c.mu:.2g}" + (f", grip {grip:.3g} N" if grip > 0 else "")
+        text = f"friction at contact '{c.name}' needs μ >= {need:.2g} ({held})"
         yield Cause("friction", c.name, need, "mu", text, _penalty(r, f"{pre}.friction", s))
 
 
-def required_mu(f: np.ndarray, friction: Any) -> float:
+def required_mu(f: np.ndarray, friction: Any, grip: float = 0.0) -> float:
     """The least μ whose friction model (a :class:`posturegen.terms.contacts.FrictionModel`) holds
-    the force f (3,) in the surface frame: |f_t|/f_n for the cone, max_k c_k·f_t/(cos(π/F)·f_n)
-    over the F faces' directions c_k for the pyramid (inf when f_n <= 0)."""
-    if f[2] <= 0:
+    the force f (3,) in the surface frame, pressed by ``grip`` beyond it (a hand's grip, same
+    unit: the cone's apex moved by it, posturegen.terms.forces): with p = f_n + grip, |f_t|/p
+    for the cone, max_k c_k·f_t/(cos(π/F)·p) over the F faces' directions c_k for the pyramid
+    (inf when p <= 0)."""
+    pressed = f[2] + grip
+    if pressed <= 0:
         return float("inf")
     if friction.kind == "cone":
-        return float(np.linalg.norm(f[:2]) / f[2])
+        return float(np.linalg.norm(f[:2]) / pressed)
     th = 2 * np.pi * np.arange(friction.faces) / friction.faces
     along = np.cos(th) * f[0] + np.sin(th) * f[1]
-    return float(along.max() / (np.cos(np.pi / friction.faces) * f[2]))
+    return float(along.max() / (np.cos(np.pi / friction.faces) * pressed))
 
 
 def _collision_causes(r: Relaxed) -> Iterator[Cause]:
