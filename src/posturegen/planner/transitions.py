@@ -103,11 +103,12 @@ def hold_stage(
     it was realized (stance.next_problem's rule: the new one's forces at the vertices of the
     intersection), warm-started from it."""
     problem, result = touch
+    rule = rules.patches[action.patch]
     stage = {
         "name": action.label(),
         "contacts": [
             *(_keep(n) for n in node.contacts.values()),
-            _keep(action.patch, rules.patches[action.patch].mu, rules.patches[action.patch].grip),
+            _keep(action.patch, rule.mu, rule.grip),
         ],
         "tasks": goal_tasks(goal),
     }
