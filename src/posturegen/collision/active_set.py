@@ -21,6 +21,7 @@ from .._cache import BoundedCache, Ref
 from ..model.kinematics import at_origin, base_to_world, scratch_data
 from .boxes import CollisionOptions, EnvBox, env_boxes, excluded_joint_ids, row_box_distances
 from .broad_phase import Close, closest
+from .joint_maps import JointMap, activation, joint_maps
 from .mesh_check import placed_intersections
 from .proxies import ProxyModel, proxy_model
 from .rows import CollisionTerm
@@ -71,6 +72,13 @@ class Scan:
     near_env: set[tuple[int, int]] = field(default_factory=set)
     violated_self: set[tuple[int, int]] = field(default_factory=set)
     violated_env: set[tuple[int, int]] = field(default_factory=set)
+    near_maps: set[int] = field(default_factory=set)  # joint maps (indices into ActiveSet.maps)
+    violated_maps: set[int] = field(default_factory=set)
+
+    @property
+    def violated(self) -> bool:
+        """Whether a pair or a joint map outside the held ones is violated."""
+        return bool(self.violated_self or self.violated_env or self.violated_maps)
 
 
 @dataclass
@@ -86,6 +94,10 @@ class ActiveSet:
     self_pairs: set[tuple[int, int]] = field(default_factory=set)
     env_pairs: set[tuple[int, int]] = field(default_factory=set)
     caps: np.ndarray | float = np.inf  # (P,) [m] holds' caps (stance_hold.stance_caps)
+    maps: tuple[JointMap, ...] = ()  # the robot's joint maps (collision.joint_maps)
+    maps_on: set[int] = field(default_factory=set)  # those whose rows hold (checked, near)
+    # [rad] how near a disc of each map the joints come before its rows hold (joint_maps)
+    map_reach: tuple[float, ...] = ()
     # the slots of the rows (slots.Capacity): grows with the pairs held, never shrinks
     capacity: Capacity = field(default_factory=Capacity)
     # the sphere centres (S, 3) and the margin of the last scan (term() lets go of far pairs)
@@ -106,7 +118,11 @@ class ActiveSet:
         model = robot.model
         reach = max(CAP_REACH, opts.largest_margin())  # every margin the loop tries
         caps = stance_caps(problem, pm, reach) if len(links) else np.inf
-        return cls(pm, links, env_boxes(problem), opts, model, scratch_data(model), caps=caps)
+        maps = joint_maps(robot, pm) if opts.self_collision else ()
+        reach_maps = tuple(activation(m, pm.rule.reference_q) for m in maps)
+        data = scratch_data(model)
+        boxes = env_boxes(problem)
+        return cls(pm, links, boxes, opts, model, data, caps=caps, maps=maps, map_reach=reach_maps)
 
     @property
     def n_env_candidates(self) -> int:
@@ -152,7 +168,21 @@ class ActiveSet:
             slack = clearance + self.options.activation
             wider = reference + self.options.activation if near else None
             out.near_self = self._near_self(q, body, slack, wider)
+        self._scan_maps(q, near, out)
         return out
+
+    def _scan_maps(self, q: np.ndarray, near: bool, out: Scan) -> None:
+        """The checked joint maps not yet held whose discs q (nq,) is in (violated) or, with
+        ``near``, within the map's reach [rad] of (joint_maps.activation)."""
+        checked = set(self.links.tolist())
+        for k, m in enumerate(self.maps):
+            if k in self.maps_on or self.pm.link_index(*m.joints) not in checked:
+                continue
+            gap = m.gap(q[7:])
+            if gap < 0:
+                out.violated_maps.add(k)
+            elif near and gap < self.map_reach[k]:
+                out.near_maps.add(k)
 
     def term(self, margin: float) -> CollisionTerm:
         """The collision rows of the pairs held now, ``margin`` [m] apart, in the slots of
@@ -170,6 +200,8 @@ class ActiveSet:
             margin,
             self.capacity,
             self_collision=self.options.self_collision,
+            maps=self.maps,
+            mapped=tuple(k in self.maps_on for k in range(len(self.maps))),
         )
         self.capacity = term.capacity
         return term
@@ -284,6 +316,7 @@ class ActiveSet:
         """Hold the scan's near and violated pairs too."""
         self.self_pairs |= scan.near_self | scan.violated_self
         self.env_pairs |= scan.near_env | scan.violated_env
+        self.maps_on |= scan.near_maps | scan.violated_maps
 
     def _held_env(self) -> np.ndarray:
         """(S, B) mask of the sphere-box pairs held."""

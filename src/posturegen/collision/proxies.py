@@ -63,6 +63,7 @@ class ProxyModel:
     # each joint's chain: the actuated coordinates (indices into qj) of the joints between it
     # and the base, sorted (see chains())
     chains: tuple[tuple[int, ...], ...] = ()
+    key: str = ""  # the fit's digest (_cache_key): what the robot's proxies were fitted from
 
     def __post_init__(self) -> None:
         groups = _grouped(self.spheres)  # spheres reordered: joints and groups contiguous
@@ -438,7 +439,7 @@ def proxy_model(robot: Robot) -> ProxyModel:
     ]
     joint_pairs = np.array(pairs, dtype=int).reshape(-1, 2)
     clearance = _stored_clearance(key, robot, spheres, joint_pairs, rule.reference_q)
-    pm = ProxyModel(spheres, joint_pairs, clearance, rule, limbs(model), report, chains(model))
+    pm = ProxyModel(spheres, joint_pairs, clearance, rule, limbs(model), report, chains(model), key)
     robot._proxy_model = pm
     return pm
 

@@ -47,6 +47,7 @@ from ..terms.nlp import BuildContext, Instance, Term
 from .boxes import EnvBox
 from .env_slots import env_rows
 from .env_slots import kernels as env_kernels
+from .joint_maps import JointMap
 from .native import have, ready
 from .proxies import ProxyModel
 from .self_blocks import INDEX_NAMES, self_rows
@@ -77,6 +78,10 @@ class CollisionTerm(Term):
     margin: float
     capacity: Capacity = field(default_factory=Capacity)
     self_collision: bool = True  # whether the program has self rows
+    # the robot's joint maps (posturegen.collision.joint_maps), and whether each one's rows
+    # hold (its pair checked and its joints near a disc: ActiveSet.maps_on; else unbounded)
+    maps: tuple[JointMap, ...] = ()
+    mapped: tuple[bool, ...] = ()
     name: str = "collision"
     late: ClassVar[bool] = True  # declared on the program of the others (their cache shared)
 
@@ -90,7 +95,12 @@ class CollisionTerm(Term):
         )
 
     def key(self) -> tuple[Any, ...]:
-        return ("collision", self.capacity.self_blocks, self.capacity.env_slots)
+        maps = tuple((m.joints, m.digest) for m in self._maps())
+        return ("collision", self.capacity.self_blocks, self.capacity.env_slots, maps)
+
+    def _maps(self) -> tuple[JointMap, ...]:
+        """The joint maps whose rows the program has (with its self rows)."""
+        return self.maps if self.capacity.self_blocks else ()
 
     def fingerprint(self) -> tuple[Any, ...]:
         """The key and what the declaration reads of the proxy model: the joints that carry
@@ -126,6 +136,9 @@ class CollisionTerm(Term):
             # base pose and its exponential map out of these rows' Hessians
             value, deriv = self_rows(ctx, ctx.base_frame_state(), self.table, params, native_self)
             nlp.constrain("collision.self", value, 0.0, np.inf, deriv)
+        if self._maps():
+            rows = ca.vertcat(*[m.rows(ctx.joints) for m in self._maps()])
+            nlp.constrain("collision.joint_maps", rows, 0.0, np.inf)
         if E:
             slots = ca.reshape(nlp.parameter("collision.env_slots", 20 * E), 20, E)
             rows = env_index_rows(BASE_COLUMNS + D)["chain"].stop
@@ -163,6 +176,11 @@ class CollisionTerm(Term):
             return []
         return list(zip(self.table.rows, self.fill.row_members(self.table), strict=True))
 
+    def map_rows(self) -> list[tuple[JointMap, bool]]:
+        """Each joint map of the program's rows (in order) with whether its rows hold (its pair
+        checked in this problem)."""
+        return list(zip(self._maps(), self.mapped or (True,) * len(self.maps), strict=True))
+
     def env_rows(self) -> list[tuple[int, int] | None]:
         """The sphere-box pair of each env row, None for a free slot."""
         pairs: list[tuple[int, int] | None] = list(self.env_pairs)
@@ -192,6 +210,11 @@ class CollisionTerm(Term):
         if self.capacity.self_blocks:
             lb = np.array([0.0 if members else -np.inf for _, members in self.self_groups()])
             out["collision.self"] = (lb, np.full(lb.shape, np.inf))
+        if self._maps():
+            lb = np.concatenate(
+                [np.full(len(m.discs), 0.0 if on else -np.inf) for m, on in self.map_rows()]
+            )
+            out["collision.joint_maps"] = (lb, np.full(lb.shape, np.inf))
         if self.capacity.env_slots:
             lb = np.array([-np.inf if pair is None else 0.0 for pair in self.env_rows()])
             out["collision.env"] = (lb, np.full(lb.shape, np.inf))

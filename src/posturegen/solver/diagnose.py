@@ -485,6 +485,9 @@ def _collision_causes(r: Relaxed) -> Iterator[Cause]:
                 who = f"the proxies of {_link(model, pm, i)} and {_link(model, pm, j)}"
                 pen = _penalty(r, "collision.self", s[k : k + 1])
                 yield _collision_cause(who, "each other", float(s[k]), term.margin, pen)
+    s = r.slacks.get("collision.joint_maps")
+    if s is not None:
+        yield from _map_causes(r, term, s)
     s = r.slacks.get("collision.env")
     if s is None:
         return
@@ -514,6 +517,23 @@ def _collision_causes(r: Relaxed) -> Iterator[Cause]:
         yield cause
 
 
+def _map_causes(r: Relaxed, term: Any, s: np.ndarray) -> Iterator[Cause]:
+    """One cause per joint map (posturegen.collision.joint_maps) whose rows had to move: its
+    two joints would have to enter the region of their plane where its links' meshes meet."""
+    model, start = r.problem.robot.model, 0
+    for m, on in term.map_rows():
+        rows = s[start : start + len(m.discs)]
+        start += len(m.discs)
+        if on and rows.max(initial=0.0) > TOL_LENGTH:
+            a, b = (_joint_link(model, j) for j in m.joints)
+            text = (
+                f"the meshes of {a} and {b} would meet (their two joints inside the region "
+                "where they do, collision.joint_maps)"
+            )
+            pen = _penalty(r, "collision.joint_maps", rows)
+            yield Cause("collision", f"{a} / {b}", float(rows.max()), "", text, pen)
+
+
 def _collision_cause(who: str, other: str, slack: float, margin: float, penalty: float) -> Cause:
     """``who`` had to come ``slack`` [m] closer to ``other`` than the margin allows."""
     d = margin - slack
@@ -529,7 +549,11 @@ def _collision_cause(who: str, other: str, slack: float, margin: float, penalty:
 
 def _link(model: pin.Model, pm: Any, sphere: int) -> str:
     """The name of the link (body frame) carrying a proxy sphere."""
-    joint = pm.spheres[sphere].joint_id
+    return _joint_link(model, pm.spheres[sphere].joint_id)
+
+
+def _joint_link(model: pin.Model, joint: int) -> str:
+    """The name of the link (body frame) a joint moves."""
     for f in model.frames:
         if f.parentJoint == joint and f.type == pin.FrameType.BODY:
             return str(f.name)

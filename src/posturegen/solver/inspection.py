@@ -67,6 +67,13 @@ def _collision_lines(check: ActiveSet, term: CollisionTerm) -> list[str]:
             f"{term.fill.blocks} of the program's {term.capacity.self_blocks} blocks of "
             f"{SELF_SLOT_BLOCK} slots"
         )
+        if term.maps:
+            rows = sum(len(m.discs) for m in term.maps)
+            lines.append(
+                f"  collision.joint_maps: {rows} rows (discs) for {len(term.maps)} pairs of links "
+                "whose proxies overlap at the reference posture: their meshes meet on a region "
+                "of the plane of the two joints between them, which the rows keep out of"
+            )
     else:
         lines.append("  collision.self: none (self_collision: false)")
     if check.boxes:

@@ -348,7 +348,7 @@ class _Loop:
         active = self.active
         for _round in range(max_rounds):
             scan = active.scan(self.q_check, self.margin, near=not self.runs)
-            if self.runs and not (scan.violated_self or scan.violated_env):
+            if self.runs and not scan.violated:
                 return  # no candidate outside the active set is violated
             if self.runs and not budget_left():
                 return  # the call's budget is spent: the re-check says what is violated
