@@ -7,6 +7,9 @@ from __future__ import annotations
 import copy
 import dataclasses
 import os
+import subprocess
+import sys
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -125,3 +128,46 @@ def test_prune_keeps_the_most_recently_used_kernels(tmp_path, monkeypatch):
     monkeypatch.setattr(native, "MAX_CACHE_BYTES", 7 << 20)
     native._prune()
     assert sorted(p.name for p in root.iterdir()) == ["building", "mid", "new"]
+
+
+def _jobs(folder: Path, kernels: list[ca.Function]) -> Path:
+    """A builder's jobs folder holding ``kernels`` (as _build_in_background writes it)."""
+    folder.mkdir()
+    for k, kernel in enumerate(kernels):
+        kernel.save(str(folder / f"{k:02d}-{native.digest_of(kernel)}.casadi"))
+    return folder
+
+
+@needs_cc
+def test_two_builders_of_the_same_kernels_compile_each_once(kernel_cache):
+    """Two builder processes started together on the same kernels (two workers' builders)
+    leave one folder per kernel, every kernel on the disk, and no claim behind."""
+    kernels = _small_kernels()
+    cc = codegen.compiler()
+    env = {**os.environ, "POSTUREGEN_CACHE": str(kernel_cache)}
+    jobs = [_jobs(kernel_cache / f"jobs{i}", kernels) for i in range(2)]
+    procs = [
+        subprocess.Popen([sys.executable, "-m", native.__name__, str(j), cc], env=env) for j in jobs
+    ]
+    assert [p.wait(timeout=300) for p in procs] == [0, 0]
+    for kernel in kernels:
+        digest = native.digest_of(kernel)
+        folders = list(native.kernel_dir().glob(f"{kernel.name()}-{digest}-*"))
+        assert len(folders) == 1, folders
+        assert (folders[0] / native.SAVED).is_file()
+    assert not list(native.kernel_dir().glob(".claim-*"))
+
+
+def test_a_claim_is_held_while_its_builder_lives(kernel_cache):
+    """A claim of this host names its process: held while it runs, taken as stale (and
+    removed) once it has ended; a second claim of a held digest is refused."""
+    native.kernel_dir().mkdir(parents=True)
+    claim = native._claim("d1")
+    assert claim is not None and native._claim("d1") is None
+    assert native._held("d1")
+    ended = subprocess.Popen([sys.executable, "-c", "pass"])
+    ended.wait()
+    host = claim.read_text().split()[0]
+    claim.write_text(f"{host} {ended.pid}")
+    assert not native._held("d1") and not claim.exists()
+    assert native._claim("d1") is not None
