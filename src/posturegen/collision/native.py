@@ -21,8 +21,8 @@ took 4.1 s at ``-O1`` (``-O0``: 2.0 s, but the Hessian at 1.4 ms), a wait no pla
 make. The workers of a plan or a batch each start a builder for the same kernels: a builder
 compiles a kernel under a claim (a file made atomically) and leaves those another one holds to
 it (Talos' 4-stair plan from an empty cache on two workers: 13.4 s, 16.0 s when both
-builders compiled every kernel). Without a C compiler, or
-when a build fails, the kernels stay on the virtual machine.
+builders compiled every kernel). Without a C compiler, or when a build fails, the kernels stay
+on the virtual machine.
 """
 
 from __future__ import annotations
@@ -138,9 +138,14 @@ def wait(timeout: float | None = None) -> bool:
         time.sleep(0.05)
 
 
+def _saved(name: str, digest: str) -> list[Path]:
+    """The saved functions of the finished builds of kernel ``name`` of ``digest``."""
+    return sorted(kernel_dir().glob(f"{name}-{digest}-*/{SAVED}"))
+
+
 def _from_disk(name: str, digest: str) -> ca.Function | None:
     """The compiled kernel of ``digest`` from its folder, else None."""
-    for path in sorted(kernel_dir().glob(f"{name}-{digest}-*/{SAVED}")):
+    for path in _saved(name, digest):
         try:
             loaded = ca.Function.load(str(path))
         except RuntimeError:  # unreadable (its library moved, another CasADi): built again
@@ -229,10 +234,14 @@ def _prune() -> None:
     evict_least_recent(folders, MAX_CACHE_BYTES)
 
 
+def _claim_path(digest: str) -> Path:
+    return kernel_dir() / f".claim-{digest}"
+
+
 def _claim(digest: str) -> Path | None:
     """The claim file of ``digest`` when this builder now holds it (created atomically; it
     names this host and process); None when another builder holds it."""
-    path = kernel_dir() / f".claim-{digest}"
+    path = _claim_path(digest)
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
         fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
@@ -247,7 +256,7 @@ def _held(digest: str) -> bool:
     """Whether a live builder holds the claim of ``digest``: one of this host whose process
     runs, or one of another host (a shared cache) younger than CLAIM_STALE [s]. A stale claim
     is removed."""
-    path = kernel_dir() / f".claim-{digest}"
+    path = _claim_path(digest)
     try:
         host, pid = path.read_text().split()
         age = time.time() - path.stat().st_mtime
@@ -267,38 +276,41 @@ def _held(digest: str) -> bool:
     return False
 
 
-def _on_disk(name: str, digest: str) -> bool:
-    return any(kernel_dir().glob(f"{name}-{digest}-*/{SAVED}"))
-
-
 def _main(jobs: Path, cc: str) -> None:
     """The builder process: compile each job of ``jobs`` not on the disk yet, largest first,
     one at a time under its claim; a job another builder holds (the workers of a plan or a
     batch, each with a builder of its own, need the same kernels) is left to it, and waited
     for at the end (built here if that builder ended without it). Then remove the folder."""
     try:
-        pending = []
-        for job in sorted(jobs.glob("*.casadi")):
-            pending.append((job, job.stem.split("-", 1)[1], ca.Function.load(str(job))))
+        pending = [
+            (job.stem.split("-", 1)[1], ca.Function.load(str(job)))
+            for job in sorted(jobs.glob("*.casadi"))
+        ]
         while pending:
             waiting = []
-            for job, digest, kernel in pending:
-                if _on_disk(kernel.name(), digest):
-                    continue
+            for digest, kernel in pending:
+                if _saved(kernel.name(), digest):
+                    continue  # checked just before its claim: another builder may have made it
                 claim = _claim(digest)
                 if claim is None:
-                    waiting.append((job, digest, kernel))
+                    waiting.append((digest, kernel))
                     continue
                 try:
-                    build(kernel, digest, cc)
+                    if not _saved(kernel.name(), digest):  # made between the check and the claim
+                        build(kernel, digest, cc)
                 finally:
                     claim.unlink(missing_ok=True)
-            pending = [w for w in waiting if not _on_disk(w[2].name(), w[1])]
-            while pending and all(_held(d) for _, d, _k in pending):
+            pending = _unbuilt(waiting)
+            while pending and all(_held(digest) for digest, _ in pending):
                 time.sleep(CLAIM_POLL)
-                pending = [w for w in pending if not _on_disk(w[2].name(), w[1])]
+                pending = _unbuilt(pending)
     finally:
         shutil.rmtree(jobs, ignore_errors=True)
+
+
+def _unbuilt(kernels: list[tuple[str, ca.Function]]) -> list[tuple[str, ca.Function]]:
+    """The (digest, kernel) pairs of ``kernels`` whose build is not on the disk."""
+    return [(d, k) for d, k in kernels if not _saved(k.name(), d)]
 
 
 if __name__ == "__main__":
