@@ -174,6 +174,8 @@ class ActiveSet:
     def _scan_maps(self, q: np.ndarray, near: bool, out: Scan) -> None:
         """The checked joint maps not yet held whose discs q (nq,) is in (violated) or, with
         ``near``, within the map's reach [rad] of (joint_maps.activation)."""
+        if not self.maps:
+            return  # (most robots: no set of the checked pairs made at every scan)
         checked = set(self.links.tolist())
         for k, m in enumerate(self.maps):
             if k in self.maps_on or self.pm.link_index(*m.joints) not in checked:
