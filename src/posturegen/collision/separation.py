@@ -5,6 +5,7 @@ pairs pressed together at the initial posture are a little apart
 from __future__ import annotations
 
 import hashlib
+import math
 
 import numpy as np
 import pinocchio as pin
@@ -120,8 +121,9 @@ def _shortfalls(
     sphere pairs that the free joints can part, and how far each is below its joint pair's
     ``target`` [m] (joint Jacobians already in ``data``); None when there is no such pair."""
     rows, short = [], []
+    jacobians: dict[int, np.ndarray] = {}  # per joint: its Jacobian, fetched once a step
     for i, j, link, dk in zip(near.i, near.j, near.link, near.d, strict=True):
-        grad = _pair_gradient(model, data, pm, centers, (int(i), int(j)))
+        grad = _pair_gradient(model, data, pm, centers, (int(i), int(j)), jacobians)
         if np.linalg.norm(grad[movable]) > 1e-6:  # pairs the free joints can part
             rows.append(grad[movable])
             short.append(target[link] - dk)
@@ -136,16 +138,20 @@ def _pair_gradient(
     pm: ProxyModel,
     centers: np.ndarray,
     pair: tuple[int, int],
+    jacobians: dict[int, np.ndarray],
 ) -> np.ndarray:
     """(nv,) the gradient of |c_i - c_j| - r_i - r_j: n·(J_i - J_j), n the unit vector from
-    c_j to c_i, J the sphere centres' Jacobians (joint Jacobians already in ``data``)."""
+    c_j to c_i, J the sphere centres' Jacobians (joint Jacobians already in ``data``;
+    ``jacobians`` holds each joint's (6, nv) in LOCAL_WORLD_ALIGNED once fetched)."""
     i, j = pair
     n = centers[i] - centers[j]
-    n /= max(float(np.linalg.norm(n)), 1e-12)
+    n /= max(math.sqrt(n.dot(n)), 1e-12)  # np.linalg.norm's own sum, without its checks
     grad = np.zeros(model.nv)
     for s, sign in ((i, 1.0), (j, -1.0)):
         jid = pm.spheres[s].joint_id
-        J = pin.getJointJacobian(model, data, jid, pin.LOCAL_WORLD_ALIGNED)
+        J = jacobians.get(jid)
+        if J is None:
+            J = jacobians[jid] = pin.getJointJacobian(model, data, jid, pin.LOCAL_WORLD_ALIGNED)
         lever = centers[s] - data.oMi[jid].translation
         grad += sign * (n @ (J[:3] - pin.skew(lever) @ J[3:]))
     return grad
