@@ -356,6 +356,54 @@ def test_row_order_does_not_decide_the_solution(collision):
         np.testing.assert_allclose(run.lam_g, reference.lam_g[order], atol=1e-5)
 
 
+class _Counting:
+    """An oracle that counts its Hessian evaluations."""
+
+    def __init__(self, oracle: Oracle) -> None:
+        self.oracle, self.n, self.m, self.hessians = oracle, oracle.n, oracle.m, 0
+
+    def first_order(self, x):
+        return self.oracle.first_order(x)
+
+    def hessian(self, x, sigma, lam_g):
+        self.hessians += 1
+        return self.oracle.hessian(x, sigma, lam_g)
+
+
+@pytest.mark.parametrize("collision", [False, True])
+def test_the_hessian_kept_between_evaluations_finds_the_same_solution(collision, monkeypatch):
+    """With ∇²L evaluated at one accepted step of HESSIAN_EVERY (kept at the others), a run
+    evaluates it at most once per HESSIAN_EVERY accepted steps, fewer times than the run that
+    evaluates it at every step, and ends where that run ends."""
+    problem = next(iter(reach_balance_family(collision)(1, 29)))
+    program = Program.of(problem)
+    if collision:
+        _active, term = initial_collision_term(problem)
+        program = Program.of(problem, collision_term=term)
+    oracle, x0, bounds = _core_inputs(program)
+    accepted = [0]
+    original = core._try_step
+
+    def counted(*args):
+        step = original(*args)
+        accepted[0] += step is not None
+        return step
+
+    monkeypatch.setattr(core, "_try_step", counted)
+    kept = _Counting(oracle)
+    run = sqp(kept, x0, bounds, SQPOptions())
+    steps, accepted[0] = accepted[0], 0
+    monkeypatch.setattr(core, "HESSIAN_EVERY", 1)
+    every = _Counting(oracle)
+    reference = sqp(every, x0, bounds, SQPOptions())
+    assert run.status == reference.status == "Solve_Succeeded"
+    assert every.hessians >= accepted[0]  # the first iterate's, then one per accepted step
+    assert kept.hessians <= -(-steps // core.HESSIAN_EVERY) + 1
+    assert kept.hessians < every.hessians
+    np.testing.assert_allclose(run.x, reference.x, atol=1e-6)
+    np.testing.assert_allclose(run.lam_g, reference.lam_g, atol=1e-5)
+
+
 def test_a_start_at_the_solution_with_its_multipliers_takes_no_iteration(free_problems):
     problem = _with(free_problems[3], method="sqp")
     first = solve(problem)
