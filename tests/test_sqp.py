@@ -25,10 +25,10 @@ from posturegen.solver.sqp import core
 from posturegen.solver.sqp.core import (
     LINEAR_TOL,
     Bounds,
+    Iterate,
     SQPOptions,
     SQPRun,
     _Flat,
-    _Iterate,
     _model_reduction,
     _reachable,
     _relaxed,
@@ -36,6 +36,7 @@ from posturegen.solver.sqp.core import (
     sqp,
 )
 from posturegen.solver.sqp.hessian import AUGMENT, CURVATURE_MAX, DELTA, convexified
+from posturegen.solver.sqp.model import Model, corrected
 from posturegen.solver.sqp.oracle import Oracle
 
 
@@ -264,8 +265,8 @@ def test_a_qp_on_the_convexified_hessian_gives_newtons_step_and_the_programs_mul
     kkt = np.block([[H, A.T], [A, np.zeros((2, 2))]])
     newton = np.linalg.solve(kkt, np.concatenate([-c, b]))
     np.testing.assert_allclose(sol.d, newton[:n], rtol=1e-6, atol=1e-8)
-    model = core._Model(Bs, c, A, np.ones(2, dtype=bool), np.zeros(n, dtype=bool), C)
-    fixed = core._corrected(sol, model, qp.equal, np.ones(n))
+    model = Model(Bs, c, A, np.ones(2, dtype=bool), np.zeros(n, dtype=bool), C)
+    fixed = corrected(sol, model, qp.equal, np.ones(n))
     size = max(1.0, float(np.abs(fixed.lam_rows).max()))
     np.testing.assert_allclose(H @ sol.d + c + A.T @ fixed.lam_rows, 0.0, atol=1e-6 * size)
     np.testing.assert_allclose(fixed.lam_rows, newton[n:], rtol=1e-6, atol=1e-6)
@@ -650,8 +651,8 @@ def test_a_run_settles_after_feasible_iterates_whose_cost_no_longer_changes():
     bounds = Bounds(np.zeros(1), np.ones(1), np.zeros(1), np.zeros(1), np.ones(1))
     options = SQPOptions()
 
-    def at(f: float, g: float) -> _Iterate:
-        return _Iterate.of(np.zeros(1), f, np.zeros(1), np.array([g]), np.zeros((1, 1)), bounds)
+    def at(f: float, g: float) -> Iterate:
+        return Iterate.of(np.zeros(1), f, np.zeros(1), np.array([g]), np.zeros((1, 1)), bounds)
 
     flat = _Flat()
     costs = 2.0 - 1e-8 * np.arange(3 * core.FLAT_ITERATIONS)
@@ -671,7 +672,7 @@ def test_the_model_counts_no_linearized_residue_below_the_qps_tolerance():
     grad = np.array([1.0, 0.0])
     J = np.zeros((3, 2))
     J[0, 1] = 1.0  # the rows move with x₁ only, the cost with x₀
-    it = _Iterate.of(np.zeros(2), 0.0, grad, np.zeros(3), J, bounds)
+    it = Iterate.of(np.zeros(2), 0.0, grad, np.zeros(3), J, bounds)
     Bs = np.eye(2)
     d = np.array([-1e-3, 5e-10])  # row 0 off by 5e-10: the QP's residue
     assert _model_reduction(it, Bs, d, bounds, 1e8) == pytest.approx(1e-3 - 0.5e-6, rel=1e-9)

@@ -29,7 +29,8 @@ import numpy as np
 from ..qp import registry
 from ..qp.base import QP, QPSolution
 from .elastic import solve_elastic
-from .hessian import convexified
+from .iterate import Bounds, Iterate, max_abs
+from .model import Model, corrected, model_at, relinearized
 from .oracle import Oracle
 
 ETA = 1e-4  # a step is taken when the merit decreases by this fraction of the model's
@@ -46,16 +47,21 @@ PENALTY_MAX = 1e8
 STALL_ITERATIONS = 30
 SUCCEEDED = "Solve_Succeeded"  # IPOPT's names: the orchestrator reads both solvers alike
 ACCEPTABLE = "Solved_To_Acceptable_Level"
+UNFINISHED = "Maximum_Iterations_Exceeded"  # a run's status until it ends otherwise
 # the Hessian of the Lagrangian (its evaluation and its convexification: 0.5 of a Talos
 # collision iteration's 1.1 ms, the generated Hessian alone 0.27 ms, cache-cold) is evaluated at
-# one accepted step of this many and kept at the others, a new QP model from ∇f and J there
-# (:func:`_relinearized`). Never-seen families, 2 x 49 problems each (seeds 104731 and 104732,
-# in-process, median call, 1 -> 4): reach-balance-collision 16.0 -> 12.5 and 15.2 -> 11.0 ms,
-# near-body 21.0 -> 18.1 and 20.5 -> 18.7, stances 20.7 -> 18.0 and 21.0 -> 17.6, box 17.0
-# -> 14.1 and 17.9 -> 14.2, reach-balance-free 5.2 -> 3.7 and 5.2 -> 3.9, SQP iterations
-# +2-35 %; verified the same but one stance of seed 104731 (its call's budget spent), and the
-# stances of seeds 0-2 (150 each) 147, 146, 145 -> 147, 146, 146. Every 3rd or 6th: within
-# the machine's noise of every 4th
+# one accepted step of this many; at the others the last one is carried by a damped BFGS update
+# along the step (:func:`.model.relinearized`). Never-seen families, 49 problems each, seeds
+# 104731 and 104733, in-process, both codes in one run, median call: reach-balance-collision
+# 15.5 -> 13.4 and 15.5 -> 13.1 ms, near-body 20.4 -> 18.4 and 24.8 -> 21.9, stances 20.4 ->
+# 18.5 and 19.7 -> 18.4, box 16.9 -> 15.0 and 18.6 -> 16.1, reach-balance-free 5.2 -> 4.4 and
+# 5.6 -> 4.8; the slowest calls 108 -> 44, 149 -> 111, 131 -> 26 ms (reach, near-body, box);
+# SQP iterations +10-30 %; verified the same but one stance of seed 104731 (its call's budget
+# spent), the stances of seeds 0-2 (150 each) 147, 146, 145 -> 147, 146, 146. The Hessian kept
+# without the update: a few percent faster on the reaches, but a Talos stance on one foot after
+# a non-inclusive step (tests/test_contacts.py) ran two runs of 29 and 44 iterations until
+# their regions were nothing, where the update took 11 (the Hessian at every step 5). Kept
+# for 2, 5 or 7 steps instead of 3 (without the update): within the machine's noise
 HESSIAN_EVERY = 4
 # accepted steps in a row at feasible iterates whose cost changes by less than FLAT_CHANGE ×
 # max(1, |f|): the run stops there, acceptable (a Talos stance crawled 100 iterations at a
@@ -77,21 +83,6 @@ class SQPOptions:
     radius_min: float = 1e-10
     penalty: float = 1.0  # ν to start from
     qp: str | None = None  # the QP backend (None: the first available)
-
-
-@dataclass(frozen=True)
-class Bounds:
-    """lbx <= x <= ubx, lbg <= g(x) <= ubg, and the variables' scales (n,) for the region."""
-
-    lbx: np.ndarray
-    ubx: np.ndarray
-    lbg: np.ndarray
-    ubg: np.ndarray
-    scale: np.ndarray
-
-    def violation(self, g: np.ndarray) -> np.ndarray:
-        """(m,) how far each row is outside its bounds (0 inside)."""
-        return np.maximum(np.maximum(self.lbg - g, g - self.ubg), 0.0)
 
 
 @dataclass
@@ -140,7 +131,7 @@ class _Flat:
 
     costs: list[float] = field(default_factory=list)
 
-    def settled(self, it: _Iterate, options: SQPOptions) -> bool:
+    def settled(self, it: Iterate, options: SQPOptions) -> bool:
         """Count an accepted iterate; True after FLAT_ITERATIONS feasible ones whose cost
         changed by at most FLAT_CHANGE × max(1, |f|)."""
         if it.worst > options.tol_primal:
@@ -150,26 +141,6 @@ class _Flat:
         last = self.costs[-FLAT_ITERATIONS:]
         change = max(last) - min(last)
         return len(last) == FLAT_ITERATIONS and change <= FLAT_CHANGE * max(1.0, abs(it.f))
-
-
-@dataclass
-class _Iterate:
-    x: np.ndarray
-    f: float
-    grad: np.ndarray  # (n,)
-    g: np.ndarray  # (m,)
-    J: np.ndarray  # (m, n)
-    viol: np.ndarray  # (m,) how far each row is outside its bounds
-    l1: float  # ‖viol‖₁
-    worst: float  # ‖viol‖∞
-
-    @classmethod
-    def of(
-        cls, x: np.ndarray, f: float, grad: np.ndarray, g: np.ndarray, J: np.ndarray, bounds: Bounds
-    ) -> _Iterate:
-        """The iterate at x of f, ∇f, g and J, its violations measured against ``bounds``."""
-        viol = bounds.violation(g)
-        return cls(x, f, grad, g, J, viol, float(np.sum(viol)), _max_abs(viol))
 
 
 def sqp(
@@ -184,14 +155,11 @@ def sqp(
     """Solve min f s.t. the bounds from x0 (with multipliers and a working set when given)."""
     t0 = time.perf_counter()
     run, it = _first(oracle, x0, bounds, lam_g0, lam_x0, duals0)
-    lam_g, lam_x = run.lam_g, run.lam_x
-    radius, penalty = options.radius, options.penalty
-    # the iterate's QP model in the scaled variables: the same arrays for each of its QPs
-    # (the QP backend keeps its factorization for them)
-    scaled: _Model | None = None
-    stall = _Stall(it.l1)
-    flat = _Flat()
-    kept = 0  # accepted steps since the model's Hessian was evaluated
+    lam_g, lam_x, radius, penalty = run.lam_g, run.lam_x, options.radius, options.penalty
+    # the iterate's QP model (the same arrays for each of its QPs: the QP backend keeps its
+    # factorization for them); kept: the accepted steps since its Hessian was evaluated
+    scaled: Model | None = None
+    kept, stall, flat = 0, _Stall(it.l1), _Flat()
     for _ in range(options.max_iter):
         run.rows_bound |= it.viol > 0
         stop = _stop(it, lam_g, lam_x, bounds, options, stall, t0)
@@ -199,7 +167,8 @@ def sqp(
             run.status = stop
             break
         if scaled is None:
-            scaled = _model(oracle, it, lam_g, lam_x, bounds, run)
+            scaled, kept = model_at(oracle, it, lam_g, lam_x, bounds), 0
+            run.modified_hessians += scaled.modified
         run.iterations += 1
         qp = _qp(it, scaled, bounds, radius, run.duals)
         sol, penalty = _step(qp, it, bounds, penalty, options, run, scaled)
@@ -209,21 +178,23 @@ def sqp(
         d_size = float(np.max(np.abs(sol.d) / bounds.scale, initial=0.0))
         if d_size < 1e-12:  # the QP stays where it is: its multipliers are the news
             lam_g, lam_x, run.status = _standing(sol, qp, it, bounds, options)
-            break
+            if run.status == SUCCEEDED or not kept:
+                break
+            scaled, run.status = None, UNFINISHED  # stalled on a kept Hessian: evaluate it
+            continue
         run.history.append((it.f, it.worst, radius))
         step = _try_step(oracle, it, sol, qp, bounds, penalty, options)
         if step is None:  # rejected: a smaller region
-            radius = SHRINK * min(radius, d_size)
+            radius, fresh = _shrunk(radius, d_size, kept, options)
             if radius < options.radius_min:
                 run.status = _stalled(it, options)
                 break
+            scaled = None if fresh else scaled
             continue
-        it, ratio = step
-        lam_g = sol.lam_rows
-        lam_x = _own_bound_multipliers(sol, qp, it, bounds)
+        previous, (it, ratio) = it, step
+        lam_g, lam_x = sol.lam_rows, _own_bound_multipliers(sol, qp, it, bounds)
         kept += 1
-        scaled = _relinearized(scaled, it, bounds) if kept < HESSIAN_EVERY else None
-        kept %= HESSIAN_EVERY
+        scaled = relinearized(scaled, previous, it, lam_g, bounds) if kept < HESSIAN_EVERY else None
         if flat.settled(it, options) and not _converged(it, lam_g, lam_x, bounds, options):
             run.status = ACCEPTABLE
             break
@@ -231,64 +202,29 @@ def sqp(
             radius = min(2.0 * radius, RADIUS_MAX)
     else:
         run.status = SUCCEEDED if _converged(it, lam_g, lam_x, bounds, options) else run.status
+    return _finished(run, it, lam_g, lam_x, t0)
+
+
+def _shrunk(radius: float, d_size: float, kept: int, options: SQPOptions) -> tuple[float, bool]:
+    """The region after a step of size ``d_size`` [scaled] was rejected, SHRINK of the smaller
+    of both, and whether the model's Hessian is to be evaluated: a region below
+    ``radius_min`` ends the run, but not on a Hessian kept for ``kept`` steps (it is evaluated
+    and the region starts again from ``options.radius``)."""
+    radius = SHRINK * min(radius, d_size)
+    if radius < options.radius_min and kept:
+        return options.radius, True
+    return radius, False
+
+
+def _finished(run: SQPRun, it: Iterate, lam_g: np.ndarray, lam_x: np.ndarray, t0: float) -> SQPRun:
+    """``run`` ended at ``it`` with its multipliers and its wall time since ``t0``."""
     run.x, run.f, run.lam_g, run.lam_x = it.x, it.f, lam_g, lam_x
     run.wall_s = time.perf_counter() - t0
     return run
 
 
-@dataclass(frozen=True)
-class _Model:
-    """The QP's model at an iterate, in the scaled variables d̃ = d / s: B̃ = S B S, c̃ = S ∇f,
-    Ã = J S, and the rows and bounds that B̃ holds (hessian.convexified): where those hold at
-    the QP's solution, its multipliers λ' are the program's λ' + C d̃ (rows, then bounds)."""
-
-    B: np.ndarray  # (n, n)
-    c: np.ndarray  # (n,)
-    A: np.ndarray  # (m, n)
-    rows: np.ndarray  # (m,) bool: the rows held
-    held_x: np.ndarray  # (n,) bool: the bounds held
-    C: np.ndarray  # (rows + bounds held, n)
-
-
-def _model(
-    oracle: Oracle,
-    it: _Iterate,
-    lam_g: np.ndarray,
-    lam_x: np.ndarray,
-    bounds: Bounds,
-    run: SQPRun,
-) -> _Model:
-    """The QP's model at ``it`` in the scaled variables: ∇²L made positive definite (first
-    on the null space of the rows and bounds that hold: the equality rows and those with a
-    multiplier), ∇f and J."""
-    As = it.J * bounds.scale
-    rows = (bounds.lbg == bounds.ubg) | (lam_g != 0)  # (m,)
-    held_x = lam_x != 0  # (n,) the variables at a bound of their own
-    unit = np.eye(len(held_x))[held_x]
-    Bs, modified, C = convexified(
-        oracle.hessian(it.x, 1.0, lam_g), bounds.scale, np.vstack([As[rows], unit])
-    )
-    run.modified_hessians += modified
-    return _Model(Bs, it.grad * bounds.scale, As, rows, held_x, C)
-
-
-def _relinearized(model: _Model, it: _Iterate, bounds: Bounds) -> _Model:
-    """``model``'s B̃ with c̃ = S ∇f and Ã = J S of ``it``: a step's QP between two Hessian
-    evaluations (HESSIAN_EVERY). B̃'s correction C is not carried (it is of the rows held
-    where B̃ was made): the QP's multipliers are those of B̃, exact at a step of zero."""
-    n = it.x.size
-    return _Model(
-        model.B,
-        it.grad * bounds.scale,
-        it.J * bounds.scale,
-        model.rows,
-        model.held_x,
-        np.zeros((0, n)),
-    )
-
-
 def _stop(
-    it: _Iterate,
+    it: Iterate,
     lam_g: np.ndarray,
     lam_x: np.ndarray,
     bounds: Bounds,
@@ -313,27 +249,27 @@ def _first(
     lam_g0: np.ndarray | None,
     lam_x0: np.ndarray | None,
     duals0: np.ndarray | None,
-) -> tuple[SQPRun, _Iterate]:
+) -> tuple[SQPRun, Iterate]:
     """The run's record and its first iterate (x0 inside its bounds)."""
     x = np.clip(x0, bounds.lbx, bounds.ubx)
     lam_g = np.zeros(oracle.m) if lam_g0 is None else np.array(lam_g0, dtype=float)
     lam_x = np.zeros(oracle.n) if lam_x0 is None else np.array(lam_x0, dtype=float)
-    run = SQPRun(x, 0.0, lam_g, lam_x, "Maximum_Iterations_Exceeded", 0, 0, duals0, 0.0)
+    run = SQPRun(x, 0.0, lam_g, lam_x, UNFINISHED, 0, 0, duals0, 0.0)
     run.rows_bound = np.zeros(oracle.m, dtype=bool)
     return run, _at(oracle, x, bounds)
 
 
 def _step(
     qp: QP,
-    it: _Iterate,
+    it: Iterate,
     bounds: Bounds,
     penalty: float,
     options: SQPOptions,
     run: SQPRun,
-    model: _Model,
+    model: Model,
 ) -> tuple[QPSolution, float]:
     """The QP's step (relaxed when its rows cannot hold in the region, elastic as the last
-    resort) and the penalty it needs; its multipliers the program's (_Model)."""
+    resort) and the penalty it needs; its multipliers the program's (model.corrected)."""
     sol = _relaxed(qp, options, run)
     if sol.solved:
         sol = _unscaled(sol, bounds.scale)
@@ -344,51 +280,31 @@ def _step(
         sol = _unscaled(sol, bounds.scale)
     run.qp_iterations += sol.iterations
     if sol.solved:
-        sol = _corrected(sol, model, qp.equal, bounds.scale)
+        sol = corrected(sol, model, qp.equal, bounds.scale)
         run.rows_bound |= sol.lam_rows != 0
     return sol, penalty
 
 
-def _corrected(sol: QPSolution, model: _Model, equal: np.ndarray, scale: np.ndarray) -> QPSolution:
-    """The multipliers of a QP solved on B̃ (its solution in the variables' units): the
-    program's, λ' + C d̃, where the rows and bounds that B̃ holds hold at the solution (an
-    equality, or a multiplier of their own)."""
-    if not model.C.any():
-        return sol
-    extra = model.C @ (sol.d / scale)  # (k,) in the scaled QP's units
-    k = int(model.rows.sum())
-    lam_rows, lam_bounds = sol.lam_rows.copy(), sol.lam_bounds.copy()
-    active = (lam_rows[model.rows] != 0) | equal[model.rows]
-    lam_rows[model.rows] += np.where(active, extra[:k], 0.0)
-    at_bound = lam_bounds[model.held_x] != 0
-    lam_bounds[model.held_x] += np.where(at_bound, extra[k:] / scale[model.held_x], 0.0)
-    return dataclasses.replace(sol, lam_rows=lam_rows, lam_bounds=lam_bounds)
-
-
-def _max_abs(v: np.ndarray) -> float:
-    return float(np.max(np.abs(v), initial=0.0))
-
-
 def _converged(
-    it: _Iterate, lam_g: np.ndarray, lam_x: np.ndarray, bounds: Bounds, options: SQPOptions
+    it: Iterate, lam_g: np.ndarray, lam_x: np.ndarray, bounds: Bounds, options: SQPOptions
 ) -> bool:
     """Primal feasibility, stationarity of the Lagrangian, and multipliers of the right sign
     only at rows at their bounds (complementarity, to tol_dual)."""
     if it.worst > options.tol_primal:
         return False
     r = it.grad + it.J.T @ lam_g + lam_x
-    scale = max(1.0, _max_abs(it.grad))
-    if _max_abs(r) > options.tol_dual * scale:
+    scale = max(1.0, max_abs(it.grad))
+    if max_abs(r) > options.tol_dual * scale:
         return False
     # a multiplier > 0 needs its row at its upper bound, < 0 at its lower one
     gap = np.where(lam_g > 0, bounds.ubg - it.g, it.g - bounds.lbg)
     gap = np.where(np.isfinite(gap), gap, 1e3)
-    return _max_abs(lam_g * gap) <= options.tol_dual * scale
+    return max_abs(lam_g * gap) <= options.tol_dual * scale
 
 
 def _qp(
-    it: _Iterate,
-    scaled: _Model,
+    it: Iterate,
+    scaled: Model,
     bounds: Bounds,
     radius: float,
     duals: np.ndarray | None,
@@ -512,7 +428,7 @@ ELASTIC_RAISES = 2
 
 
 def _elastic(
-    qp: QP, it: _Iterate, penalty: float, options: SQPOptions, run: SQPRun
+    qp: QP, it: Iterate, penalty: float, options: SQPOptions, run: SQPRun
 ) -> tuple[QPSolution, float]:
     """The elastic QP's step at ν, ν ×10 (ELASTIC_RAISES times at most) while the step leaves
     the linearized violation above 90 % of the current one (and ν < PENALTY_MAX)."""
@@ -530,7 +446,7 @@ def _elastic(
     return sol, penalty
 
 
-def _steered(it: _Iterate, Bs: np.ndarray, d: np.ndarray, bounds: Bounds, penalty: float) -> float:
+def _steered(it: Iterate, Bs: np.ndarray, d: np.ndarray, bounds: Bounds, penalty: float) -> float:
     """ν large enough that the step's predicted reduction is at least half its reduction of
     the linearized violation, ν ≥ (∇fᵀd + ½dᵀBd) / ((1 - 0.5) Δv) (Nocedal & Wright, 18.36):
     ν follows what the steps need, not the QP's multipliers (a degenerate QP's run to 1e4)."""
@@ -547,14 +463,14 @@ def _steered(it: _Iterate, Bs: np.ndarray, d: np.ndarray, bounds: Bounds, penalt
 LINEAR_TOL = 1e-9
 
 
-def _linearized_violation(it: _Iterate, d: np.ndarray, bounds: Bounds) -> float:
+def _linearized_violation(it: Iterate, d: np.ndarray, bounds: Bounds) -> float:
     """‖viol(g + J d)‖₁, the rows within LINEAR_TOL of their bounds counted as holding."""
     v = bounds.violation(it.g + it.J @ d)
     return float(np.sum(v[v > LINEAR_TOL]))
 
 
 def _model_reduction(
-    it: _Iterate, Bs: np.ndarray, d: np.ndarray, bounds: Bounds, penalty: float
+    it: Iterate, Bs: np.ndarray, d: np.ndarray, bounds: Bounds, penalty: float
 ) -> float:
     """ν‖viol(g)‖₁ - (∇fᵀd + ½dᵀBd + ν‖viol(g + J d)‖₁): what the step promises."""
     v0 = it.l1
@@ -564,13 +480,13 @@ def _model_reduction(
 
 def _try_step(
     oracle: Oracle,
-    it: _Iterate,
+    it: Iterate,
     sol: QPSolution,
     qp: QP,
     bounds: Bounds,
     penalty: float,
     options: SQPOptions,
-) -> tuple[_Iterate, float] | None:
+) -> tuple[Iterate, float] | None:
     """The next iterate and its ratio actual / predicted reduction, or None when neither the
     step nor its second-order correction reduces the merit enough."""
     pred = _model_reduction(it, qp.B, sol.d, bounds, penalty)  # qp.B: B̃
@@ -598,12 +514,12 @@ def _try_step(
     return trial, ratio
 
 
-def _at(oracle: Oracle, x: np.ndarray, bounds: Bounds) -> _Iterate:
+def _at(oracle: Oracle, x: np.ndarray, bounds: Bounds) -> Iterate:
     """The iterate at x: f, ∇f, g, J and the rows' violations."""
-    return _Iterate.of(x, *oracle.first_order(x), bounds)
+    return Iterate.of(x, *oracle.first_order(x), bounds)
 
 
-def _own_bound_multipliers(sol: QPSolution, qp: QP, it: _Iterate, bounds: Bounds) -> np.ndarray:
+def _own_bound_multipliers(sol: QPSolution, qp: QP, it: Iterate, bounds: Bounds) -> np.ndarray:
     """The QP's bound multipliers where the bound is the variable's own (not the region's)."""
     at_lower = (it.x <= bounds.lbx + 1e-12) & (sol.lam_bounds < 0)
     at_upper = (it.x >= bounds.ubx - 1e-12) & (sol.lam_bounds > 0)
@@ -611,7 +527,7 @@ def _own_bound_multipliers(sol: QPSolution, qp: QP, it: _Iterate, bounds: Bounds
 
 
 def _standing(
-    sol: QPSolution, qp: QP, it: _Iterate, bounds: Bounds, options: SQPOptions
+    sol: QPSolution, qp: QP, it: Iterate, bounds: Bounds, options: SQPOptions
 ) -> tuple[np.ndarray, np.ndarray, str]:
     """The multipliers (rows, own bounds) of a QP whose step is nothing, and the run's
     status there: converged, else stalled."""
@@ -621,7 +537,7 @@ def _standing(
     return lam_g, lam_x, _stalled(it, options)
 
 
-def _stalled(it: _Iterate, options: SQPOptions) -> str:
+def _stalled(it: Iterate, options: SQPOptions) -> str:
     """Why the region shrank to nothing: infeasible when the constraints do not hold."""
     if it.worst > options.tol_primal:
         return "Infeasible_Problem_Detected"
