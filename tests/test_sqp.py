@@ -336,16 +336,22 @@ def _core_inputs(program: Program):
     return Oracle(compiled.solver, p), x0, Bounds(compiled.lbx, compiled.ubx, lbg, ubg, scales)
 
 
-@pytest.mark.parametrize("collision", [False, True])
-def test_row_order_does_not_decide_the_solution(collision):
-    """The program's rows in three random orders (blocks and rows within them mixed): the
-    same solution, from the same start, each time."""
-    problem = next(iter(reach_balance_family(collision)(1, 23)))
+def _reach_inputs(collision: bool, seed: int):
+    """The SQP core's inputs for a reach-balance problem of ``seed``, with its first active
+    set's collision rows when ``collision``."""
+    problem = next(iter(reach_balance_family(collision)(1, seed)))
     program = Program.of(problem)
     if collision:
         _active, term = initial_collision_term(problem)
         program = Program.of(problem, collision_term=term)
-    oracle, x0, bounds = _core_inputs(program)
+    return _core_inputs(program)
+
+
+@pytest.mark.parametrize("collision", [False, True])
+def test_row_order_does_not_decide_the_solution(collision):
+    """The program's rows in three random orders (blocks and rows within them mixed): the
+    same solution, from the same start, each time."""
+    oracle, x0, bounds = _reach_inputs(collision, 23)
     reference = sqp(oracle, x0, bounds, SQPOptions())
     assert reference.status == "Solve_Succeeded"
     for seed in range(3):
@@ -373,15 +379,10 @@ class _Counting:
 
 @pytest.mark.parametrize("collision", [False, True])
 def test_the_hessian_kept_between_evaluations_finds_the_same_solution(collision, monkeypatch):
-    """With ∇²L evaluated at one accepted step of HESSIAN_EVERY (kept at the others), a run
-    evaluates it at most once per HESSIAN_EVERY accepted steps, fewer times than the run that
-    evaluates it at every step, and ends where that run ends."""
-    problem = next(iter(reach_balance_family(collision)(1, 29)))
-    program = Program.of(problem)
-    if collision:
-        _active, term = initial_collision_term(problem)
-        program = Program.of(problem, collision_term=term)
-    oracle, x0, bounds = _core_inputs(program)
+    """With ∇²L evaluated at one accepted step of HESSIAN_EVERY (carried by a damped BFGS
+    update at the others), a run evaluates it at most once per HESSIAN_EVERY accepted steps,
+    fewer times than the run that evaluates it at every step, and ends where that run ends."""
+    oracle, x0, bounds = _reach_inputs(collision, 29)
     accepted = [0]
     original = core._try_step
 
