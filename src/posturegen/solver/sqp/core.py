@@ -4,7 +4,8 @@ second-order correction of a rejected step), on a dense QP backend warm-started 
 previous working set.
 
 Each iteration: B = ∇²L made positive definite (:mod:`.hessian`), evaluated at every
-HESSIAN_EVERY-th accepted step and kept in between (∇f and J are always the iterate's); the QP
+HESSIAN_EVERY-th accepted step and carried by a damped BFGS update in between (:mod:`.model`;
+∇f and J are always the iterate's); the QP
 
     min ½ dᵀBd + ∇fᵀd  s.t.  lbg <= g + J d <= ubg,  lbx <= x + d <= ubx,  |d_i| <= Δ s_i
 
