@@ -347,6 +347,33 @@ def _reach_inputs(collision: bool, seed: int):
     return _core_inputs(program)
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_oracles_derivatives_match_finite_differences(seed):
+    """The SQP's oracle on a reach with its collision rows, at a seeded point near its start
+    with seeded multipliers: J and ∇f against central differences of g and f, ∇²L (the
+    functions' upper triangle made symmetric) against central differences of ∇f + Jᵀλ."""
+    oracle, x0, bounds = _reach_inputs(True, 23)
+    rng = np.random.default_rng(seed)
+    x = np.clip(x0 + 0.05 * bounds.scale * rng.standard_normal(oracle.n), bounds.lbx, bounds.ubx)
+    lam = rng.standard_normal(oracle.m)
+    f, grad, g, J = (np.copy(v) for v in oracle.first_order(x))
+    H = oracle.hessian(x, 1.0, lam)
+    np.testing.assert_array_equal(H, H.T)
+    h = 1e-6
+    fd_J, fd_grad, fd_H = np.zeros_like(J), np.zeros_like(grad), np.zeros_like(H)
+    for k in range(oracle.n):
+        step = np.zeros(oracle.n)
+        step[k] = h
+        fp, gradp, gp, Jp = (np.copy(v) for v in oracle.first_order(x + step))
+        fm, gradm, gm, Jm = (np.copy(v) for v in oracle.first_order(x - step))
+        fd_grad[k] = (fp - fm) / (2 * h)
+        fd_J[:, k] = (gp - gm) / (2 * h)
+        fd_H[:, k] = ((gradp + Jp.T @ lam) - (gradm + Jm.T @ lam)) / (2 * h)
+    np.testing.assert_allclose(grad, fd_grad, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(J, fd_J, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(H, fd_H, rtol=1e-4, atol=1e-4 * max(1.0, np.abs(H).max()))
+
+
 @pytest.mark.parametrize("collision", [False, True])
 def test_row_order_does_not_decide_the_solution(collision):
     """The program's rows in three random orders (blocks and rows within them mixed): the

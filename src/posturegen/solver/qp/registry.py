@@ -67,9 +67,13 @@ def solve(qp: QP, name: str | None = None) -> QPSolution:
 
 def _checked(solution: QPSolution) -> QPSolution:
     """The solution, "failed" when a solved one holds a value that is not finite."""
-    finite = all(
-        np.all(np.isfinite(v)) for v in (solution.d, solution.lam_bounds, solution.lam_rows)
+    if not solution.solved:
+        return solution
+    finite = (
+        np.isfinite(solution.d).all()
+        and np.isfinite(solution.lam_bounds).all()
+        and np.isfinite(solution.lam_rows).all()
     )
-    if solution.solved and not finite:
+    if not finite:
         return dataclasses.replace(solution, status="failed")
     return solution

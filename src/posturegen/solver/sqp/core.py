@@ -21,7 +21,6 @@ Converged when the constraints hold to ``tol_primal`` and ∇f + Jᵀλ_g + λ_x
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -172,8 +171,8 @@ def sqp(
             run.modified_hessians += scaled.modified
         run.iterations += 1
         qp = _qp(it, scaled, bounds, radius, run.duals)
-        sol, penalty = _step(qp, it, bounds, penalty, options, run, scaled)
-        if not sol.solved:
+        sol, penalty, promise = _step(qp, it, bounds, penalty, options, run, scaled)
+        if promise is None:  # neither the QP nor its elastic form had a solution
             run.status = "Error_In_Step_Computation"
             break
         d_size = float(np.max(np.abs(sol.d) / bounds.scale, initial=0.0))
@@ -184,7 +183,7 @@ def sqp(
             scaled, run.status = None, UNFINISHED  # stalled on a kept Hessian: evaluate it
             continue
         run.history.append((it.f, it.worst, radius))
-        step = _try_step(oracle, it, sol, qp, bounds, penalty, options)
+        step = _try_step(oracle, it, sol, qp, bounds, penalty, options, promise)
         if step is None:  # rejected: a smaller region
             radius, fresh = _shrunk(radius, d_size, kept, options)
             if radius < options.radius_min:
@@ -268,22 +267,25 @@ def _step(
     options: SQPOptions,
     run: SQPRun,
     model: Model,
-) -> tuple[QPSolution, float]:
+) -> tuple[QPSolution, float, _Promise | None]:
     """The QP's step (relaxed when its rows cannot hold in the region, elastic as the last
-    resort) and the penalty it needs; its multipliers the program's (model.corrected)."""
+    resort), the penalty it needs and what its model promises (None: no step); its
+    multipliers the program's (model.corrected)."""
     sol = _relaxed(qp, options, run)
     if sol.solved:
         sol = _unscaled(sol, bounds.scale)
         run.duals = sol.duals
-        penalty = _steered(it, qp.B, sol.d, bounds, penalty)
+        promise = _Promise.of(it, qp.B, sol.d, bounds)
+        penalty = _steered(it, promise, penalty)
     else:
         sol, penalty = _elastic(qp, it, penalty, options, run)
         sol = _unscaled(sol, bounds.scale)
+        promise = _Promise.of(it, qp.B, sol.d, bounds) if sol.solved else None
     run.qp_iterations += sol.iterations
     if sol.solved:
         sol = corrected(sol, model, qp.equal, bounds.scale)
         run.rows_bound |= sol.lam_rows != 0
-    return sol, penalty
+    return sol, penalty, promise
 
 
 def _converged(
@@ -322,7 +324,7 @@ def _qp(
         ub=np.minimum((bounds.ubx - it.x) / s, radius),
         lbA=bounds.lbg - it.g,
         ubA=bounds.ubg - it.g,
-        equal=bounds.lbg == bounds.ubg,
+        equal=bounds.equal,
         dual_start=duals,
     )
 
@@ -330,7 +332,9 @@ def _qp(
 def _unscaled(sol: QPSolution, scale: np.ndarray) -> QPSolution:
     """A scaled QP's solution in the variables' units: d = S d̃, λ_d = S⁻¹ λ̃_d (the rows'
     multipliers are the same)."""
-    return dataclasses.replace(sol, d=sol.d * scale, lam_bounds=sol.lam_bounds / scale)
+    return QPSolution(
+        sol.status, sol.d * scale, sol.lam_bounds / scale, sol.lam_rows, sol.iterations
+    )
 
 
 def _curvature(Bs: np.ndarray, d: np.ndarray, scale: np.ndarray) -> float:
@@ -447,12 +451,12 @@ def _elastic(
     return sol, penalty
 
 
-def _steered(it: Iterate, Bs: np.ndarray, d: np.ndarray, bounds: Bounds, penalty: float) -> float:
+def _steered(it: Iterate, promise: _Promise, penalty: float) -> float:
     """ν large enough that the step's predicted reduction is at least half its reduction of
     the linearized violation, ν ≥ (∇fᵀd + ½dᵀBd) / ((1 - 0.5) Δv) (Nocedal & Wright, 18.36):
     ν follows what the steps need, not the QP's multipliers (a degenerate QP's run to 1e4)."""
-    dv = it.l1 - _linearized_violation(it, d, bounds)
-    q = float(it.grad @ d) + _curvature(Bs, d, bounds.scale)
+    dv = it.l1 - promise.violation
+    q = promise.slope + promise.curvature
     if dv > 1e-14 and q > 0:
         penalty = max(penalty, q / (0.5 * dv))
     return min(penalty, PENALTY_MAX)
@@ -470,13 +474,34 @@ def _linearized_violation(it: Iterate, d: np.ndarray, bounds: Bounds) -> float:
     return float(np.sum(v[v > LINEAR_TOL]))
 
 
+@dataclass(frozen=True)
+class _Promise:
+    """What a step d's model says, made once per step (the penalty and the ratio read it):
+    ‖viol(g + J d)‖₁ (:func:`_linearized_violation`), ∇fᵀd and ½dᵀBd."""
+
+    violation: float
+    slope: float
+    curvature: float
+
+    @classmethod
+    def of(cls, it: Iterate, Bs: np.ndarray, d: np.ndarray, bounds: Bounds) -> _Promise:
+        """The model of the step d (n,) at ``it``, B̃ = ``Bs`` in the scaled variables."""
+        return cls(
+            _linearized_violation(it, d, bounds),
+            float(it.grad @ d),
+            _curvature(Bs, d, bounds.scale),
+        )
+
+    def reduction(self, it: Iterate, penalty: float) -> float:
+        """ν‖viol(g)‖₁ - (∇fᵀd + ½dᵀBd + ν‖viol(g + J d)‖₁): what the step promises."""
+        return penalty * (it.l1 - self.violation) - self.slope - self.curvature
+
+
 def _model_reduction(
     it: Iterate, Bs: np.ndarray, d: np.ndarray, bounds: Bounds, penalty: float
 ) -> float:
-    """ν‖viol(g)‖₁ - (∇fᵀd + ½dᵀBd + ν‖viol(g + J d)‖₁): what the step promises."""
-    v0 = it.l1
-    v1 = _linearized_violation(it, d, bounds)
-    return penalty * (v0 - v1) - float(it.grad @ d) - _curvature(Bs, d, bounds.scale)
+    """ν‖viol(g)‖₁ - (∇fᵀd + ½dᵀBd + ν‖viol(g + J d)‖₁): what the step d promises."""
+    return _Promise.of(it, Bs, d, bounds).reduction(it, penalty)
 
 
 def _try_step(
@@ -487,10 +512,12 @@ def _try_step(
     bounds: Bounds,
     penalty: float,
     options: SQPOptions,
+    promise: _Promise,
 ) -> tuple[Iterate, float] | None:
-    """The next iterate and its ratio actual / predicted reduction, or None when neither the
-    step nor its second-order correction reduces the merit enough."""
-    pred = _model_reduction(it, qp.B, sol.d, bounds, penalty)  # qp.B: B̃
+    """The next iterate and its ratio actual / predicted reduction (``promise``: the step's
+    model), or None when neither the step nor its second-order correction reduces the merit
+    enough."""
+    pred = promise.reduction(it, penalty)
     merit0 = it.f + penalty * it.l1
     if pred <= 1e-16 * max(1.0, abs(merit0)):
         return None

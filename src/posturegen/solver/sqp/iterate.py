@@ -4,6 +4,7 @@ with the variables' scales (:class:`Bounds`), and x with f, ∇f, g, J and the r
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,6 +24,13 @@ class Bounds:
     lbg: np.ndarray
     ubg: np.ndarray
     scale: np.ndarray
+
+    @functools.cached_property
+    def equal(self) -> np.ndarray:
+        """(m,) bool: the rows with lbg = ubg (read-only)."""
+        equal = self.lbg == self.ubg
+        equal.flags.writeable = False
+        return equal
 
     def violation(self, g: np.ndarray) -> np.ndarray:
         """(m,) how far each row is outside its bounds (0 inside)."""

@@ -39,7 +39,7 @@ def model_at(
     on the null space of the rows and bounds that hold: the equality rows and those with a
     multiplier), ∇f and J."""
     As = it.J * bounds.scale
-    rows = (bounds.lbg == bounds.ubg) | (lam_g != 0)  # (m,)
+    rows = bounds.equal | (lam_g != 0)  # (m,)
     held_x = lam_x != 0  # (n,) the variables at a bound of their own
     unit = np.eye(len(held_x))[held_x]
     Bs, modified, C = convexified(
@@ -77,8 +77,13 @@ def damped_bfgs(B: np.ndarray, s: np.ndarray, y: np.ndarray) -> np.ndarray:
     sy = float(s @ y)
     theta = 1.0 if sy >= 0.2 * sBs else 0.8 * sBs / (sBs - sy)
     r = theta * y + (1 - theta) * Bs
-    updated = B - np.outer(Bs, Bs) / sBs + np.outer(r, r) / float(s @ r)
-    return updated if np.abs(updated).max() <= CURVATURE_MAX else B
+    removed = np.outer(Bs, Bs)
+    removed /= sBs
+    added = np.outer(r, r)
+    added /= float(s @ r)
+    updated = np.subtract(B, removed, out=removed)
+    updated += added
+    return updated if np.abs(updated, out=added).max() <= CURVATURE_MAX else B
 
 
 def corrected(sol: QPSolution, model: Model, equal: np.ndarray, scale: np.ndarray) -> QPSolution:

@@ -38,8 +38,8 @@ class Oracle:
             "grad": (self._grad.scatter(1), np.zeros(self.n)),
             "g_jac": (self._jac.scatter(0), np.zeros(self.m)),
             "jac": (self._jac.scatter(1), np.zeros((self.m, self.n))),
-            "hess": (self._hess.scatter(0), np.zeros((self.n, self.n))),
         }
+        self._hess_at = _symmetric_at(self._hess.sparsity[0])
         self.evaluations = 0
 
     def set_parameters(self, p: np.ndarray) -> Oracle:
@@ -71,5 +71,20 @@ class Oracle:
         self._sigma[0] = sigma
         self._lam[:] = lam_g
         self.evaluations += 1
-        upper = self._dense_of("hess", self._hess()[0])
-        return upper + np.triu(upper, 1).T
+        upper, mirrored, off = self._hess_at
+        nonzeros = self._hess()[0]
+        H = np.zeros((self.n, self.n))
+        flat = H.ravel()  # a view
+        flat[upper] = nonzeros
+        flat[mirrored] = nonzeros[off]
+        return H
+
+
+def _symmetric_at(sparsity: ca.Sparsity) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the nonzeros of a symmetric matrix given by one triangle (CasADi's ``sparsity``:
+    nlp_hess_l gives the upper one) go in its flat (row-major) dense form: their own places,
+    the mirrored places of those off the diagonal, and which those are."""
+    rows, cols = (np.asarray(v, dtype=np.intp) for v in sparsity.get_triplet())
+    n = sparsity.size2()
+    off = rows != cols
+    return rows * n + cols, cols[off] * n + rows[off], off
