@@ -190,13 +190,16 @@ class ActiveSet:
         """The collision rows of the pairs held now, ``margin`` [m] apart, in the slots of
         ``capacity``. Pairs that no longer fit are first let go of where they are far at the
         last posture scanned (see :meth:`_let_go`); only then is the capacity doubled."""
-        if not self._fits():
+        held = tuple(sorted(self.self_pairs))
+        if not self._fits(held):
             self._let_go()
-        if not self._fits():
+            held = tuple(sorted(self.self_pairs))
+        if not self._fits(held):
             self._trim()
+            held = tuple(sorted(self.self_pairs))
         term = CollisionTerm(
             self.pm,
-            tuple(sorted(self.self_pairs)),
+            held,
             tuple(sorted(self.env_pairs)),
             self.boxes,
             margin,
@@ -230,9 +233,9 @@ class ActiveSet:
             d_env = row_box_distances(self.pm, centers, self.boxes, near)
             self.env_pairs = {(i, k) for i, k in self.env_pairs if d_env[i, k] < near}
 
-    def _fits(self) -> bool:
-        """Whether the pairs held fit the capacity."""
-        needs = SelfFill.of(self.pm, tuple(sorted(self.self_pairs))).blocks
+    def _fits(self, held: tuple[tuple[int, int], ...]) -> bool:
+        """Whether the pairs held (``held``: the self pairs, sorted) fit the capacity."""
+        needs = SelfFill.of(self.pm, held).blocks
         return needs <= self.capacity.self_blocks and len(self.env_pairs) <= (
             self.capacity.env_slots
         )

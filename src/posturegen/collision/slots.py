@@ -20,6 +20,7 @@ infeasibility). The capacity grows by doubling when an active set needs more
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -177,6 +178,17 @@ class SelfFill:
         """Blocks needed."""
         return len(self.pairs)
 
+    @functools.cached_property
+    def _slot_pairs(self) -> tuple[np.ndarray, np.ndarray]:
+        """(m,) each held sphere pair's slot (its block's first slot + its place in it) and
+        (m, 2) its spheres, block after block (made once per fill: a fill is shared)."""
+        col = np.concatenate(
+            [b * SELF_SLOT_BLOCK + np.arange(len(m)) for b, m in enumerate(self.members)]
+        )
+        ij = np.array([p for m in self.members for p in m], dtype=int)  # (m, 2)
+        col.flags.writeable = ij.flags.writeable = False
+        return col, ij
+
     def parameters(
         self, pm: ProxyModel, table: RowTable, capacity: int, held: np.ndarray
     ) -> dict[str, np.ndarray]:
@@ -198,10 +210,7 @@ class SelfFill:
             rows[:n] = table.row_of_pair[k]
             free[table.row_of_pair[k]] = 0.0
             clear[:n] = held[k]
-            col = np.concatenate(
-                [b * SELF_SLOT_BLOCK + np.arange(len(m)) for b, m in enumerate(self.members)]
-            )
-            ij = np.array([p for m in self.members for p in m], dtype=int)  # (m, 2)
+            col, ij = self._slot_pairs
             centers, radii = pm.centers_local, pm.radii
             slots[0:3, col] = centers[ij[:, 0]].T
             slots[3:6, col] = centers[ij[:, 1]].T
