@@ -29,7 +29,7 @@ from posturegen.solver.sqp.core import (
     SQPOptions,
     SQPRun,
     _Flat,
-    _model_reduction,
+    _Promise,
     _reachable,
     _relaxed,
     _theta_max,
@@ -703,9 +703,10 @@ def test_the_model_counts_no_linearized_residue_below_the_qps_tolerance():
     it = Iterate.of(np.zeros(2), 0.0, grad, np.zeros(3), J, bounds)
     Bs = np.eye(2)
     d = np.array([-1e-3, 5e-10])  # row 0 off by 5e-10: the QP's residue
-    assert _model_reduction(it, Bs, d, bounds, 1e8) == pytest.approx(1e-3 - 0.5e-6, rel=1e-9)
+    promised = _Promise.of(it, Bs, d, bounds).reduction(it, 1e8)
+    assert promised == pytest.approx(1e-3 - 0.5e-6, rel=1e-9)
     d[1] = 10 * LINEAR_TOL
-    charged = _model_reduction(it, Bs, d, bounds, 1e8)
+    charged = _Promise.of(it, Bs, d, bounds).reduction(it, 1e8)
     assert charged == pytest.approx(1e-3 - 0.5e-6 - 1e8 * 10 * LINEAR_TOL, rel=1e-6)
 
 

@@ -497,13 +497,6 @@ class _Promise:
         return penalty * (it.l1 - self.violation) - self.slope - self.curvature
 
 
-def _model_reduction(
-    it: Iterate, Bs: np.ndarray, d: np.ndarray, bounds: Bounds, penalty: float
-) -> float:
-    """ν‖viol(g)‖₁ - (∇fᵀd + ½dᵀBd + ν‖viol(g + J d)‖₁): what the step d promises."""
-    return _Promise.of(it, Bs, d, bounds).reduction(it, penalty)
-
-
 def _try_step(
     oracle: Oracle,
     it: Iterate,
