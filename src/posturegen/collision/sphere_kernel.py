@@ -18,16 +18,12 @@ from __future__ import annotations
 
 import ctypes
 import functools
-import hashlib
 import os
-import platform
-import subprocess
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from .._compiler import cache_root, compiler
+from .._compiler import kernel_library, kernel_path
 from ..errors import PosturegenError
 
 _SOURCE = r"""
@@ -108,35 +104,17 @@ _HIT_BYTES = 24  # sizeof(hit) on LP64
 
 def _library_path() -> Path:
     """Where this machine's library is kept: its source's and the machine's digest."""
-    digest = hashlib.sha256(
-        f"{_SOURCE}|{platform.machine()}|{platform.system()}".encode()
-    ).hexdigest()[:16]
-    return cache_root() / "kernels" / f"spheres-{digest}.so"
+    return kernel_path("spheres", _SOURCE)
 
 
 @functools.cache
 def _library() -> ctypes.CDLL | None:
     """The compiled search (compiled on first use), or None without a C compiler, on a
     platform whose C ``long`` is not 64 bits, or when the build fails."""
-    cc = compiler()
-    if cc is None or ctypes.sizeof(_LONG) != 8 or os.environ.get("POSTUREGEN_NO_NATIVE_SCAN"):
+    if ctypes.sizeof(_LONG) != 8 or os.environ.get("POSTUREGEN_NO_NATIVE_SCAN"):
         return None
-    path = _library_path()
-    if not path.exists():
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            with tempfile.TemporaryDirectory(dir=path.parent) as tmp:
-                src = Path(tmp) / "spheres.c"
-                src.write_text(_SOURCE)
-                out = Path(tmp) / path.name
-                cmd = [cc, "-O2", "-shared", "-fPIC", "-ffp-contract=off", str(src), "-o", str(out)]
-                subprocess.run(cmd, check=True, capture_output=True, timeout=120)
-                os.replace(out, path)  # atomic: another process may be at it too
-        except (OSError, subprocess.SubprocessError):
-            return None
-    try:
-        lib = ctypes.CDLL(str(path))
-    except OSError:
+    lib = kernel_library("spheres", _SOURCE)
+    if lib is None:
         return None
     lib.close_pairs.restype = _LONG
     return lib
