@@ -12,6 +12,7 @@ from posturegen._cache import BoundedCache
 from posturegen.cli import _demo_dir, main
 from posturegen.io.problem_file import problem_from_dict
 from posturegen.solver.inspection import describe, initial_collision_term, solver_line
+from posturegen.solver.sqp import native
 
 STAND = yaml.safe_load((_demo_dir() / "stand-reach.yaml").read_text())
 # 1.4 cm from the right hand's proxies at the initial posture: its sphere-box pairs are near
@@ -84,7 +85,8 @@ def test_inspect_says_which_solver_runs(tmp_path, capsys, monkeypatch):
     path.write_text(yaml.safe_dump(data))
     assert main(["inspect", str(path)]) == 0
     out = capsys.readouterr().out  # the default
-    assert "solver: auto: posturegen's SQP (QP: daqp), then IPOPT from the same start" in out
+    loop = "C" if native.available() else "Python"
+    assert f"solver: auto: posturegen's SQP ({loop} loop, QP: daqp), then IPOPT from" in out
     data["options"]["solver"] = {"method": "ipopt"}
     path.write_text(yaml.safe_dump(data))
     assert main(["inspect", str(path)]) == 0
@@ -93,4 +95,4 @@ def test_inspect_says_which_solver_runs(tmp_path, capsys, monkeypatch):
     data["options"]["solver"] = {"qp": "proxsuite"}
     path.write_text(yaml.safe_dump(data))
     assert main(["inspect", str(path)]) == 0
-    assert "solver: sqp: posturegen's SQP (QP: proxsuite)" in capsys.readouterr().out
+    assert f"solver: sqp: posturegen's SQP ({loop} loop, QP: proxsuite)" in capsys.readouterr().out

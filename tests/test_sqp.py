@@ -530,7 +530,7 @@ def test_an_elastic_step_whose_violation_cannot_fall_stops_raising_the_penalty()
         equal=np.array([False]),
     )
     run = SQPRun(np.zeros(2), 0.0, np.zeros(1), np.zeros(2), "", 0, 0, None, 0.0)
-    sol, penalty = core._elastic(qp, None, 1.0, SQPOptions(), run)
+    sol, penalty = core._elastic(qp, 1.0, SQPOptions(), run)
     assert sol.solved
     np.testing.assert_allclose(sol.d, [0.01, 0.01], atol=1e-8)  # as far as the region goes
     assert run.elastic_qps == core.ELASTIC_RAISES + 1

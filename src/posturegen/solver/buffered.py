@@ -7,11 +7,20 @@ A Buffered holds its function's memory: one call at a time (its owner's lock).""
 
 from __future__ import annotations
 
+import ctypes
+import functools
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import casadi as ca
 import numpy as np
+
+from .._compiler import capsule_pointer
+
+# CasADi's evaluation of a FunctionBuffer, ``void casadi::_function_buffer_eval(void*)``: what
+# a Buffered's call runs, callable from C with :meth:`Buffered.address`
+_EVAL_SYMBOL = "_ZN6casadi21_function_buffer_evalEPv"
 
 
 class Buffered:
@@ -63,14 +72,36 @@ class Buffered:
         )
         return dense
 
+    def positions(self, i: int) -> np.ndarray:
+        """(nnz,) where output ``i``'s nonzeros go in its dense form flattened row-major."""
+        sp = self.sparsity[i]
+        rows, cols = sp.get_triplet()
+        return np.asarray(rows, dtype=np.intp) * sp.size2() + np.asarray(cols, dtype=np.intp)
+
     def scatter(self, i: int) -> Callable[[np.ndarray, np.ndarray], None]:
         """A function writing output ``i``'s nonzeros into a dense (rows, cols) array (zeros
         elsewhere)."""
-        sp = self.sparsity[i]
-        rows, cols = sp.get_triplet()
-        flat = np.asarray(rows, dtype=np.intp) * sp.size2() + np.asarray(cols, dtype=np.intp)
+        flat = self.positions(i)
 
         def write(nonzeros: np.ndarray, dense: np.ndarray) -> None:
             dense.ravel()[flat] = nonzeros
 
         return write
+
+    def address(self) -> int:
+        """The C address of this call's FunctionBuffer: ``eval_address()`` called on it
+        evaluates the function into the arrays, as a call does (the Buffered must live)."""
+        return capsule_pointer(self._buffer._self())
+
+
+@functools.cache
+def eval_address() -> int | None:
+    """The C address of CasADi's FunctionBuffer evaluation (None when its library does not
+    export it under the name this CasADi version gives it)."""
+    folder = Path(ca.__file__).parent
+    for path in sorted(folder.glob("libcasadi.so*")) + sorted(folder.glob("libcasadi*.dylib")):
+        try:
+            return int(ctypes.cast(ctypes.CDLL(str(path))[_EVAL_SYMBOL], ctypes.c_void_p).value)
+        except (OSError, AttributeError):
+            continue
+    return None

@@ -10,6 +10,7 @@ from ..collision.rows import CollisionTerm
 from ..collision.slots import SELF_SLOT_BLOCK
 from .problem import Program, SolverOptions
 from .qp import registry as qp_registry
+from .sqp import native
 
 
 def initial_collision_term(problem: Any) -> tuple[ActiveSet, CollisionTerm] | None:
@@ -43,7 +44,8 @@ def solver_line(options: SolverOptions) -> str:
     """Which solver a solve of the problem runs (SolverOptions.method)."""
     method = options.solver_method()
     qp = options.qp or (qp_registry.available() or ["none"])[0]
-    sqp = f"posturegen's SQP (QP: {qp})"
+    loop = "C" if native.available() else "Python"  # posturegen.solver.sqp.native
+    sqp = f"posturegen's SQP ({loop} loop, QP: {qp})"
     what = {
         "auto": f"{sqp}, then IPOPT from the same start when it fails",
         "sqp": sqp,

@@ -21,7 +21,8 @@ from .._cache import BoundedCache, Ref
 from .buffered import Buffered
 from .compile import CACHE_SIZE, CompiledNLP, is_compiled
 from .problem import Program
-from .sqp.core import Bounds, SQPOptions, sqp
+from .sqp.core import Bounds, SQPOptions
+from .sqp.native import sqp
 from .sqp.oracle import Oracle
 from .starts import carried
 

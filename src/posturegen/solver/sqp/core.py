@@ -278,7 +278,7 @@ def _step(
         promise = _Promise.of(it, qp.B, sol.d, bounds)
         penalty = _steered(it, promise, penalty)
     else:
-        sol, penalty = _elastic(qp, it, penalty, options, run)
+        sol, penalty = _elastic(qp, penalty, options, run)
         sol = _unscaled(sol, bounds.scale)
         promise = _Promise.of(it, qp.B, sol.d, bounds) if sol.solved else None
     run.qp_iterations += sol.iterations
@@ -432,9 +432,7 @@ def _reachable(qp: QP) -> np.ndarray:
 ELASTIC_RAISES = 2
 
 
-def _elastic(
-    qp: QP, it: Iterate, penalty: float, options: SQPOptions, run: SQPRun
-) -> tuple[QPSolution, float]:
+def _elastic(qp: QP, penalty: float, options: SQPOptions, run: SQPRun) -> tuple[QPSolution, float]:
     """The elastic QP's step at ν, ν ×10 (ELASTIC_RAISES times at most) while the step leaves
     the linearized violation above 90 % of the current one (and ν < PENALTY_MAX)."""
     v0 = float(np.sum(np.maximum(np.maximum(qp.lbA, -qp.ubA), 0.0)))

@@ -8,10 +8,31 @@ cost 74 µs more each, more than the generated code of Talos' Jacobian itself)."
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import casadi as ca
 import numpy as np
 
 from ..buffered import Buffered
+
+
+@dataclass(frozen=True)
+class Parts:
+    """What evaluates an oracle from C (:mod:`.native`): its calls, their input arrays, and
+    where each output's nonzeros go in its dense form (flat, row-major)."""
+
+    grad: Buffered  # nlp_grad_f: f, ∇f
+    jac: Buffered  # nlp_jac_g: g, J
+    hess: Buffered  # nlp_hess_l: ∇²L's upper triangle
+    x: np.ndarray  # (n,) the calls' x
+    sigma: np.ndarray  # (1,) the Hessian's σ
+    lam: np.ndarray  # (m,) the Hessian's λ
+    at_grad: np.ndarray  # ∇f's nonzeros in (n,)
+    at_g: np.ndarray  # g's nonzeros in (m,)
+    at_jac: np.ndarray  # J's nonzeros in (m, n)
+    at_upper: np.ndarray  # ∇²L's nonzeros in (n, n)
+    at_mirrored: np.ndarray  # the off-diagonal ones mirrored
+    off: np.ndarray  # which nonzeros those are (indices)
 
 
 class Oracle:
@@ -41,6 +62,24 @@ class Oracle:
         }
         self._hess_at = _symmetric_at(self._hess.sparsity[0])
         self.evaluations = 0
+
+    def parts(self) -> Parts:
+        """What evaluates this oracle from C: its calls, inputs and dense positions."""
+        upper, mirrored, off = self._hess_at
+        return Parts(
+            self._grad,
+            self._jac,
+            self._hess,
+            self._x,
+            self._sigma,
+            self._lam,
+            self._grad.positions(1),
+            self._jac.positions(0),
+            self._jac.positions(1),
+            upper,
+            mirrored,
+            np.flatnonzero(off),
+        )
 
     def set_parameters(self, p: np.ndarray) -> Oracle:
         """Evaluate at parameters ``p`` from now on (the same structure: buffers reused)."""
