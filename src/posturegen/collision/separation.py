@@ -119,7 +119,11 @@ def _shortfalls(
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """(A (k, m), b (k,)): the gradients on the ``movable`` joints (m,) of the ``near``
     sphere pairs that the free joints can part, and how far each is below its joint pair's
-    ``target`` [m] (joint Jacobians already in ``data``); None when there is no such pair."""
+    ``target`` [m] (joint Jacobians already in ``data``); None when there is no such pair.
+
+    Pair by pair: computed for all pairs at once (einsum over stacked Jacobians, 185 -> 102 µs
+    a step, 2026-12-05), the starts moved by ~1e-13 and IPOPT then failed HRP-2's vertical
+    ladder climb at "left foot on rung 6" and the rail_step plan, both verified from these."""
     rows, short = [], []
     jacobians: dict[int, np.ndarray] = {}  # per joint: its Jacobian, fetched once a step
     for i, j, link, dk in zip(near.i, near.j, near.link, near.d, strict=True):
