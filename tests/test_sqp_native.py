@@ -103,3 +103,20 @@ def test_without_the_c_loop_cores_runs(monkeypatch):
         assert run.history == reference.history
     finally:
         native._library.cache_clear()
+
+
+@needs_cc
+@pytest.mark.parametrize(
+    "options",
+    [SQPOptions(max_time_s=1e-9), SQPOptions(max_iter=0), SQPOptions(max_iter=3)],
+    ids=["out of time", "no iteration", "three iterations"],
+)
+def test_the_c_loop_stops_where_core_stops(options):
+    """The run's limits: out of time before its first iteration, no iteration allowed, three:
+    the same status, iterations and iterate as core's."""
+    oracle, x0, bounds = _reach_inputs(True, 23)
+    reference = core.sqp(oracle, x0, bounds, options)
+    run = native.sqp(oracle, x0, bounds, options)
+    assert run.status == reference.status != core.SUCCEEDED
+    assert run.iterations == reference.iterations and len(run.history) == len(reference.history)
+    np.testing.assert_allclose(run.x, reference.x, atol=1e-12)
