@@ -105,10 +105,22 @@ def convexified(
                     C = none.copy()
                     C[rows] = (weight * base / norms[rows, None]) * unit
                     return B, True, C
+    return by_eigenvalues(Hs, lifted, held, delta)
+
+
+def by_eigenvalues(
+    Hs: np.ndarray, lifted: np.ndarray, held: np.ndarray, delta: float = DELTA
+) -> tuple[np.ndarray, bool, np.ndarray]:
+    """:func:`convexified`'s last two ways, for S H S (``Hs``) and S H S + δ I (``lifted``)
+    that neither δ nor the τ ladder make positive definite: kept on the held gradients' null
+    space and clipped on their span (when some held gradient is not zero), else its
+    eigenvalues' magnitudes clipped. The SQP's C loop (:mod:`.native`) makes the first ways
+    itself and asks for these."""
+    if (np.linalg.norm(held, axis=1) > 0).any():
         blocks = _blocks(lifted, held, delta)
         if blocks is not None:
             return blocks[0], True, blocks[1]
-    return _clipped(Hs, delta, flip=True), True, none
+    return _clipped(Hs, delta, flip=True), True, np.zeros((len(held), Hs.shape[0]))
 
 
 def _clipped(M: np.ndarray, delta: float, flip: bool = False) -> np.ndarray:

@@ -260,7 +260,7 @@ static void linear_model(Sqp *s, It it) {
 }
 
 /* model_at: ∇²L at it in the scaled variables, S H S + δ I when positive definite, else
-   hessian.convexified's τ ladder (:func:`augmented`), else Python's hessian.convexified; the
+   hessian.convexified's τ ladder (:func:`augmented`), else Python's hessian.by_eigenvalues; the
    rows held (equalities and rows with a multiplier) and the bounds held (a multiplier of their
    own). Returns 0, or -1 when Python failed. */
 static long model_at(Sqp *s, It it) {

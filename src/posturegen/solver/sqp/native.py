@@ -37,7 +37,7 @@ from ..compile import CACHE_SIZE
 from ..qp import registry
 from ..qp.base import QP, QPSolution
 from . import core
-from .hessian import AUGMENT, CURVATURE_MAX, DELTA, convexified
+from .hessian import AUGMENT, CURVATURE_MAX, DELTA, by_eigenvalues
 from .iterate import Bounds
 from .oracle import Oracle
 
@@ -328,10 +328,12 @@ class _Run:
         s.q_solved, s.q_iters = sol.solved, sol.iterations
 
     def _convexified(self) -> None:
-        """hessian.convexified of the kernel's ∇²L, with the rows and bounds it holds."""
+        """hessian.by_eigenvalues of the kernel's ∇²L, with the rows and bounds it holds: the
+        kernel found neither S H S + δ I (its B̃ now) nor the τ ladder positive definite."""
         a, s, n = self.kernel.a, self.kernel.s, self.kernel.n
         held = np.vstack([a["A"][a["rows"].view(bool)], np.eye(n)[a["held_x"].view(bool)]])
-        B, modified, C = convexified(a["H"], self.bounds.scale, held)
+        Hs = a["H"] * np.outer(self.bounds.scale, self.bounds.scale)
+        B, modified, C = by_eigenvalues(Hs, a["B"].copy(), held)
         a["B"][:] = B
         s.modified = int(modified)
         s.k_C = C.shape[0] if C.any() else 0
