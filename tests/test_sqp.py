@@ -752,3 +752,32 @@ def test_an_sqp_run_from_a_start_the_call_already_ran_is_not_made_again(free_pro
     assert again.replayed and again.iterations == 0 and np.array_equal(again.x, first.x)
     for run in (moved, relaxed, outside):
         assert not run.replayed and run.iterations > 0
+
+
+def test_ipopts_own_options_do_not_make_an_sqp_run_new(free_problems):
+    """Each solver-option variant of a structure is a solver object of its own; the SQP reads
+    none of IPOPT's options (its barrier, its warm start): a run from the same start under
+    other IPOPT options is replayed, under another time limit or QP backend it is not (the
+    active-set loop's cold retry and its continuations rebuilt the same program with other
+    IPOPT options and ran the same failing 29-iteration SQP run again)."""
+    program = Program.of(_with(free_problems[2], method="sqp"))
+    x0 = program.numeric(program.compile())[0]
+    options = program.solver_options
+
+    def variant(**changes):
+        return program.but(solver_options=dataclasses.replace(options, **changes))
+
+    ipopt_only = variant(mu_init=0.5, warm_start=not options.warm_start)
+    assert ipopt_only.compile() is not program.compile()
+    token = runs_module.BUDGET.set(runs_module.Budget(None))
+    try:
+        first = runs_module.run_nlp(program, x0)[-1]
+        again = runs_module.run_nlp(ipopt_only, x0)[-1]
+        timed = runs_module.run_nlp(variant(max_cpu_time=options.max_cpu_time / 2), x0)[-1]
+        other_qp = runs_module.run_nlp(variant(qp="proxsuite"), x0)[-1]
+    finally:
+        runs_module.BUDGET.reset(token)
+    assert first.ok and first.iterations > 3 and not first.replayed
+    assert again.replayed and again.iterations == 0 and np.array_equal(again.x, first.x)
+    for run in (timed, other_qp):
+        assert not run.replayed and run.iterations > 0
