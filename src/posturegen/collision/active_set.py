@@ -171,6 +171,30 @@ class ActiveSet:
         self._scan_maps(q, near, out)
         return out
 
+    def flagged(self, q: np.ndarray, margin: float) -> dict[tuple[int, int], float] | None:
+        """The candidate joint pairs whose proxies are below their violation threshold at
+        posture q (nq,), held or not, each with its clearance [m] (the margin, or the cap of a
+        stance's hold); None when a sphere-box pair or a checked joint map is violated there
+        (those are not measured on the meshes: :func:`mesh_distances`)."""
+        pin.forwardKinematics(self.model, self.data, at_origin(q))
+        body = self.pm.centers_world(self.model, self.data)  # (S, 3) in the base's frame
+        if self.boxes:
+            d_env = row_box_distances(self.pm, base_to_world(q, body), self.boxes, margin)
+            if np.any(np.where(self.allowed, d_env, np.inf) < margin - TOL_VIOLATION):
+                return None
+        checked = set(self.links.tolist())
+        for m in self.maps:
+            if self.pm.link_index(*m.joints) in checked and m.gap(q[7:]) < 0:
+                return None
+        if not len(self.links):
+            return {}
+        clearance = np.minimum(self.pm.pair_clearance(margin), self.caps)  # (P,) [m]
+        bad = self.pm.close_pairs(body, violation_threshold(clearance), self.links)
+        return {
+            (int(self.pm.joint_pairs[k][0]), int(self.pm.joint_pairs[k][1])): float(clearance[k])
+            for k in np.unique(bad.link)
+        }
+
     def _scan_maps(self, q: np.ndarray, near: bool, out: Scan) -> None:
         """The checked joint maps not yet held whose discs q (nq,) is in (violated) or, with
         ``near``, within the map's reach [rad] of (joint_maps.activation)."""

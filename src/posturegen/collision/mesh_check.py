@@ -115,6 +115,35 @@ def _pair_depths(
     return sorted(out, reverse=True)
 
 
+def mesh_distances(
+    model: pin.Model,
+    geometry: pin.GeometryModel,
+    q: np.ndarray,
+    joint_pairs: list[tuple[int, int]],
+) -> dict[tuple[int, int], float]:
+    """[m] the smallest distance between the meshes of each pair of joints (a, b) at posture
+    q (nq,): coal's, over every collision object of a against every one of b (0 or less
+    when they intersect; inf when either has none)."""
+    data = scratch_data(model)
+    pin.forwardKinematics(model, data, q)
+    placed: dict[int, list[tuple[Any, coal.Transform3s]]] = {}
+    for obj in geometry.geometryObjects:
+        M = data.oMi[obj.parentJoint] * obj.placement
+        transform = coal.Transform3s(M.rotation, M.translation)
+        placed.setdefault(int(obj.parentJoint), []).append((obj.geometry, transform))
+    request, out = coal.DistanceRequest(), {}
+    for a, b in joint_pairs:
+        out[(a, b)] = min(
+            (
+                coal.distance(ga, Ta, gb, Tb, request, coal.DistanceResult())
+                for ga, Ta in placed.get(a, [])
+                for gb, Tb in placed.get(b, [])
+            ),
+            default=np.inf,
+        )
+    return out
+
+
 def _user_note(
     model: pin.Model,
     geometry: pin.GeometryModel,

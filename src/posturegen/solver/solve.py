@@ -19,6 +19,7 @@ import pinocchio as pin
 from .._cache import BoundedCache, Ref
 from ..collision.active_set import ActiveSet, placed_blocked
 from ..collision.boxes import TIGHTEN_STEP
+from ..collision.mesh_check import mesh_distances
 from ..collision.rows import CollisionTerm
 from ..collision.separation import separated_start
 from ..collision.slots import Capacity
@@ -100,8 +101,11 @@ def solve(problem: Problem, x0: np.ndarray | None = None, start: Solved | None =
 
     With collision avoidance, IPOPT runs in an active-set loop (see posturegen.collision.rows):
     the rows of the pairs that are close enter the program, the solution is checked against
-    every candidate pair, violated pairs are added and IPOPT runs again, warm-started. If the
-    posture then fails the mesh check, the margin grows by 1 cm and the loop runs again.
+    every candidate pair, violated pairs are added and IPOPT runs again, warm-started; but a
+    round's posture stands, and the rounds end there, when the real meshes of every pair
+    whose proxies are closer than their clearance keep that clearance (coal) and it passes
+    the re-check (a note names those pairs). If the posture fails the mesh check, the margin
+    grows by 1 cm and the loop runs again.
     The pairs used are remembered per problem structure; the next problem of that structure
     starts with them. When IPOPT does not converge, two continuations follow: without the
     collision rows, then with the torque limits relaxed (for the SQP, only when a torque row
@@ -294,12 +298,11 @@ def _solve_avoiding(
     loop = _Loop(program.but(solver_options=run_options), active, run_options, x0, joints0, layout)
     result: Result | None = None
     for _attempt in range(opts.tighten + 1):
-        loop.rounds(opts.max_rounds)
+        result = _rounds(program, prior, loop, opts.max_rounds)
         held = (learned_self, learned_env)  # too many pairs: the earlier ones kept
         if len(active.self_pairs) + len(active.env_pairs) <= _LEARNED_MAX_PAIRS:
             held = (frozenset(active.self_pairs), frozenset(active.env_pairs))
         _LEARNED.put(base_key, (*held, active.capacity))
-        result = _result(program, [*prior, *loop.runs], loop.margin)
         if result.success or loop.runs[-1].status not in _IPOPT_OK:
             return result, [*prior, *loop.runs]
         if not any(c.name.startswith("collision") for c in result.verification.failures):
@@ -308,6 +311,43 @@ def _solve_avoiding(
             return result, [*prior, *loop.runs]
         loop.margin += TIGHTEN_STEP  # the proxies passed but a mesh did not: tighten, retry
     return result, [*prior, *loop.runs]  # type: ignore[return-value]
+
+
+def _rounds(program: Program, prior: list[Run], loop: _Loop, max_rounds: int) -> Result:
+    """The loop's rounds and their Result: the last run's, or the posture that stood
+    (:func:`_last_round`); a posture that stood but does not pass the re-check lets the
+    rounds go on."""
+    loop.rounds(max_rounds)
+    if loop.stood is not None:
+        stood = _standing_result(program, prior, loop, loop.stood)
+        if stood is not None:
+            return stood
+        loop.stand_early, loop.stood = False, None
+        loop.rounds(max_rounds)
+    return _result(program, [*prior, *loop.runs], loop.margin)
+
+
+def _standing_result(
+    program: Program,
+    prior: list[Run],
+    loop: _Loop,
+    standing: dict[tuple[int, int], tuple[float, float]],
+) -> Result | None:
+    """The Result of the posture that stood (``standing``: :meth:`_Loop.standing`), its note
+    naming the pairs whose meshes keep the clearance their proxies do not; None when it does
+    not pass the re-check."""
+    result = _result(program, [*prior, *loop.runs], loop.margin)
+    if not result.success:
+        return None
+    names = program.robot.model.names
+    note = "the meshes keep the clearance their proxies do not: " + ", ".join(
+        f"{names[a]}/{names[b]} {1e3 * mesh:.1f} mm apart >= {1e3 * clearance:.1f} mm"
+        for (a, b), (clearance, mesh) in sorted(standing.items())
+    )
+    report = result.verification
+    result.posture["notes"].append(note)
+    report = VerifyReport(report.checks, (*report.notes, note))
+    return dataclasses.replace(result, verification=report)
 
 
 def _collision_solver_options(options: SolverOptions) -> SolverOptions:
@@ -336,6 +376,9 @@ class _Loop:
     runs: list[Run] = dataclasses.field(default_factory=list)
     lam: dict[str, Any] | None = None
     margin: float = 0.0
+    stand_early: bool = True  # a converged round's posture may stand (standing)
+    # the rounds ended at a posture that stood: standing()'s pairs there
+    stood: dict[tuple[int, int], tuple[float, float]] | None = None
 
     def __post_init__(self) -> None:
         self.margin = self.program.collision_options.margin
@@ -352,6 +395,9 @@ class _Loop:
                 return  # no candidate outside the active set is violated
             if self.runs and not budget_left():
                 return  # the call's budget is spent: the re-check says what is violated
+            self.stood = self.standing() if self.runs and self.stand_early else None
+            if self.stood is not None:
+                return  # the meshes keep what the proxies do not: the re-check decides
             active.grow(scan)
             term = active.term(self.margin)
             run = self._run(term)
@@ -360,6 +406,26 @@ class _Loop:
             self.x_warm = run.x
             self.lam = block_multipliers(run, term)
             self.q_check = configuration_from_x(run.program, run.compiled, run.x)
+
+    def standing(self) -> dict[tuple[int, int], tuple[float, float]] | None:
+        """At the posture of the last run, converged: the pairs of links whose proxies are
+        closer than their clearance there, each with that clearance and its meshes' distance
+        [m] (coal on the real meshes), when every such distance keeps the clearance; None
+        otherwise, or when a sphere-box pair or a joint map is violated there. The proxies
+        are spheres fitted within 1 cm outside the meshes: the meshes of a pair whose proxies
+        are too close are often far enough apart, and the next round's run (the pair's rows
+        added, violated) is the longest of a call (a stance's thighs: 29-150 iterations)."""
+        run = self.runs[-1]
+        if run.status not in _IPOPT_OK:
+            return None
+        q = configuration_from_x(self.program, run.compiled, run.x)
+        flagged = self.active.flagged(q, self.margin)
+        if flagged is None:
+            return None
+        robot = self.program.robot
+        meshes = mesh_distances(robot.model, robot.collision_model(), q, sorted(flagged))
+        held = {pair: (flagged[pair], meshes[pair]) for pair in flagged}
+        return held if all(mesh >= clearance for clearance, mesh in held.values()) else None
 
     def _run(self, term: CollisionTerm) -> Run:
         """IPOPT on the program with ``term``'s rows: from the first start, or warm (primal
