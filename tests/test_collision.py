@@ -645,6 +645,35 @@ def test_collision_runs_start_ipopt_with_their_barrier_and_regularization(monkey
     assert problem.solver_options == before
 
 
+@pytest.mark.parametrize("method", ["sqp", "ipopt"])
+def test_only_ipopts_collision_runs_start_from_the_separated_start(monkeypatch, method):
+    """IPOPT's first collision run starts from q_init with its pressed pairs parted (Talos'
+    forearms by its thighs at half-sitting); the SQP's from q_init's joints themselves (the
+    separated start bought it no posture and cost 3.4 ms a new stance)."""
+    import sys
+
+    solve_module = sys.modules["posturegen.solver.solve"]
+    starts = []
+    run = solve_module.run_nlp
+
+    def spy(problem, *args, **kwargs):
+        starts.append(kwargs.get("joints0"))
+        return run(problem, *args, **kwargs)
+
+    monkeypatch.setattr(solve_module, "run_nlp", spy)
+    data = copy.deepcopy(STAND)
+    data["options"]["self_collision"] = True
+    data["options"]["solver"] = {"method": method}
+    problem = problem_from_dict(data)
+    result = solve(problem)
+    assert result.success, result.message
+    if method == "sqp":
+        assert starts[0] is None
+    else:
+        assert starts[0] is not None
+        assert np.abs(starts[0] - problem.q_init[7:]).max() > 1e-3  # the forearms moved
+
+
 def test_row_box_distances_below_a_threshold_are_exact_and_the_others_read_inf(talos):
     """row_box_distances(..., below): the pairs nearer than ``below`` [m] read the rows' LSE
     distance over the six faces (computed here face by face), the others +inf, and only

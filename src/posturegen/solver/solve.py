@@ -278,8 +278,8 @@ def _solve_avoiding(
     program = program.but(collision_term=None)
     opts = program.collision_options
     active = ActiveSet.of(program)
-    joints0 = None  # the first start: q_init with its pressed self pairs parted
-    if x0 is None and len(active.links):
+    joints0 = None  # IPOPT's first start: q_init with its pressed self pairs parted
+    if x0 is None and len(active.links) and program.solver_options.solver_method() == "ipopt":
         joints0 = separated_start(
             program.robot,
             active.pm,
