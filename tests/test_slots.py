@@ -156,7 +156,7 @@ def test_a_structures_later_problems_build_nothing(monkeypatch):
     structure's program, every later one (other pairs held, other rounds) makes none, and
     every posture is verified. (No round's posture stands on its meshes here: the rounds
     go on, holding more pairs.)"""
-    monkeypatch.setattr(solve_module._Loop, "standing", lambda self: None)
+    monkeypatch.setattr(solve_module._Loop, "standing", lambda self, scan: None)
     targets = [
         [0.3, -0.3, 0.8],
         [0.2, -0.1, 0.9],

@@ -1,5 +1,5 @@
 """A round's posture stands when the real meshes keep the clearance its proxies do not: the
-active-set loop ends there (posturegen.solver.solve._Loop.standing, ActiveSet.flagged,
+active-set loop ends there (posturegen.solver.solve._Loop.standing, Scan.below,
 mesh_check.mesh_distances)."""
 
 from __future__ import annotations
@@ -88,19 +88,20 @@ def test_mesh_distances_are_coals_over_every_object_of_both_links():
     assert mesh_distances(model, geometry, q, [(0, parent)])[(0, parent)] == np.inf
 
 
-def test_flagged_names_the_pairs_below_their_threshold_held_or_not(stance, stood):
-    """At the posture that stood, the thighs' proxies are below their threshold: flagged
-    names that pair with its clearance (the stance's cap), before and after the set holds
-    it, where the scan no longer reports it."""
+def test_a_scan_names_the_pairs_below_their_threshold_held_or_not(stance, stood):
+    """At the posture that stood, the thighs' proxies are below their threshold: the scan's
+    ``below`` names that pair with its clearance (the stance's cap), before and after the
+    set holds it, where the scan no longer reports it violated; no box or map is."""
     active = ActiveSet.of(stance)
-    flagged = active.flagged(stood.q, MARGIN)
+    scan = active.scan(stood.q, MARGIN, near=False)
+    flagged = scan.below
     names = {tuple(stance.robot.model.names[j] for j in pair) for pair in flagged}
     assert ("leg_left_3_joint", "leg_right_3_joint") in names, names
-    scan = active.scan(stood.q, MARGIN, near=False)
-    assert scan.violated_self
+    assert scan.violated_self and not scan.box_or_map_violated
     active.grow(scan)
-    assert not active.scan(stood.q, MARGIN, near=False).violated_self
-    assert active.flagged(stood.q, MARGIN) == flagged
+    again = active.scan(stood.q, MARGIN, near=False)
+    assert not again.violated_self
+    assert again.below == flagged
     clearance = np.minimum(active.pm.pair_clearance(MARGIN), active.caps)
     for (a, b), value in flagged.items():
         assert value == clearance[active.pm.link_index(a, b)] <= MARGIN
@@ -116,8 +117,7 @@ def test_a_round_whose_meshes_keep_the_clearance_its_proxies_do_not_ends_the_rou
     (note,) = _note(stood)
     assert "leg_left_3_joint/leg_right_3_joint" in note
     assert note in stood.posture["notes"]
-    active = ActiveSet.of(stance)
-    flagged = active.flagged(stood.q, MARGIN)
+    flagged = ActiveSet.of(stance).scan(stood.q, MARGIN, near=False).below
     robot = stance.robot
     meshes = mesh_distances(robot.model, robot.collision_model(), stood.q, sorted(flagged))
     assert flagged and all(meshes[p] >= c for p, c in flagged.items())
@@ -130,7 +130,7 @@ def test_a_posture_whose_meshes_do_not_keep_the_clearance_does_not_stand(stance,
     carries no such note."""
 
     def short(model, geometry, q, pairs):
-        flagged = ActiveSet.of(stance).flagged(q, MARGIN)
+        flagged = ActiveSet.of(stance).scan(q, MARGIN, near=False).below
         return {p: flagged[p] - 1e-4 for p in pairs}
 
     monkeypatch.setattr(solve_module, "mesh_distances", short)
@@ -146,7 +146,7 @@ def test_a_posture_that_stood_but_fails_the_re_check_lets_the_rounds_go_on(stanc
     solve_module._LEARNED.clear()
     monkeypatch.setattr(solve_module, "_standing_result", lambda *args: None)
     resumed = solve(stance)
-    monkeypatch.setattr(solve_module._Loop, "standing", lambda self: None)
+    monkeypatch.setattr(solve_module._Loop, "standing", lambda self, scan: None)
     solve_module._LEARNED.clear()
     never = solve(stance)
     assert not _note(resumed) and not _note(never)

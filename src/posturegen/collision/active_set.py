@@ -74,6 +74,12 @@ class Scan:
     violated_env: set[tuple[int, int]] = field(default_factory=set)
     near_maps: set[int] = field(default_factory=set)  # joint maps (indices into ActiveSet.maps)
     violated_maps: set[int] = field(default_factory=set)
+    # every candidate joint pair whose proxies are below their violation threshold, held or
+    # not: its clearance [m] (the margin, or the cap of a stance's hold)
+    below: dict[tuple[int, int], float] = field(default_factory=dict)
+    # a sphere-box pair or a checked joint map violated, held or not (the meshes do not
+    # measure those against the margin: solve._Loop.standing)
+    box_or_map_violated: bool = False
 
     @property
     def violated(self) -> bool:
@@ -157,11 +163,18 @@ class ActiveSet:
                 dtype=bool,
             )
             out.violated_self = closest(bad.take(~held), SELF_PER_LINK).tuples()
+            out.below = {
+                (int(self.pm.joint_pairs[k][0]), int(self.pm.joint_pairs[k][1])): float(
+                    clearance[k]
+                )
+                for k in np.unique(bad.link)
+            }
         if self.boxes:
             near = margin + self.options.environment_activation  # the largest threshold
             d_env = row_box_distances(self.pm, centers, self.boxes, near)
             d_env = np.where(self.allowed, d_env, np.inf)
             out.near_env = self._env(d_env, near)
+            out.box_or_map_violated = bool(np.any(d_env < margin - TOL_VIOLATION))
             fresh = np.where(self._held_env(), np.inf, d_env)
             out.violated_env = self._env(fresh, margin - TOL_VIOLATION)
         if len(self.links) and (near or out.violated_self or out.violated_env):
@@ -171,40 +184,20 @@ class ActiveSet:
         self._scan_maps(q, near, out)
         return out
 
-    def flagged(self, q: np.ndarray, margin: float) -> dict[tuple[int, int], float] | None:
-        """The candidate joint pairs whose proxies are below their violation threshold at
-        posture q (nq,), held or not, each with its clearance [m] (the margin, or the cap of a
-        stance's hold); None when a sphere-box pair or a checked joint map is violated there
-        (those are not measured on the meshes: :func:`mesh_distances`)."""
-        pin.forwardKinematics(self.model, self.data, at_origin(q))
-        body = self.pm.centers_world(self.model, self.data)  # (S, 3) in the base's frame
-        if self.boxes:
-            d_env = row_box_distances(self.pm, base_to_world(q, body), self.boxes, margin)
-            if np.any(np.where(self.allowed, d_env, np.inf) < margin - TOL_VIOLATION):
-                return None
-        checked = set(self.links.tolist())
-        for m in self.maps:
-            if self.pm.link_index(*m.joints) in checked and m.gap(q[7:]) < 0:
-                return None
-        if not len(self.links):
-            return {}
-        clearance = np.minimum(self.pm.pair_clearance(margin), self.caps)  # (P,) [m]
-        bad = self.pm.close_pairs(body, violation_threshold(clearance), self.links)
-        return {
-            (int(self.pm.joint_pairs[k][0]), int(self.pm.joint_pairs[k][1])): float(clearance[k])
-            for k in np.unique(bad.link)
-        }
-
     def _scan_maps(self, q: np.ndarray, near: bool, out: Scan) -> None:
         """The checked joint maps not yet held whose discs q (nq,) is in (violated) or, with
-        ``near``, within the map's reach [rad] of (joint_maps.activation)."""
+        ``near``, within the map's reach [rad] of (joint_maps.activation); whether a checked
+        map is violated, held or not."""
         if not self.maps:
             return  # (most robots: no set of the checked pairs made at every scan)
         checked = set(self.links.tolist())
         for k, m in enumerate(self.maps):
-            if k in self.maps_on or self.pm.link_index(*m.joints) not in checked:
+            if self.pm.link_index(*m.joints) not in checked:
                 continue
             gap = m.gap(q[7:])
+            out.box_or_map_violated |= gap < 0
+            if k in self.maps_on:
+                continue
             if gap < 0:
                 out.violated_maps.add(k)
             elif near and gap < self.map_reach[k]:

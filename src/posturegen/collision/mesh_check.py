@@ -127,8 +127,11 @@ def mesh_distances(
     when they intersect; inf when either has none)."""
     data = scratch_data(model)
     pin.forwardKinematics(model, data, q)
+    joints = {j for pair in joint_pairs for j in pair}
     placed: dict[int, list[tuple[Any, coal.Transform3s]]] = {}
     for obj in geometry.geometryObjects:
+        if int(obj.parentJoint) not in joints:
+            continue
         M = data.oMi[obj.parentJoint] * obj.placement
         transform = coal.Transform3s(M.rotation, M.translation)
         placed.setdefault(int(obj.parentJoint), []).append((obj.geometry, transform))

@@ -158,6 +158,9 @@ class _Program(_Layout):
 CACHE_SIZE = 32
 # compiled solvers by structure and solver options; symbolic programs, layouts read from the
 # disk cache and fingerprints ("": none) by structure
+# the leading items of Program.key() that are its structure (robot, terms, elastic form); the
+# last is the solver options, each variant of them a solver of its own on the same functions
+STRUCTURE_KEY = 3
 _CACHE: BoundedCache[CompiledNLP] = BoundedCache("compiled solvers", CACHE_SIZE)
 _PROGRAMS: BoundedCache[_Program] = BoundedCache("symbolic programs", CACHE_SIZE)
 _LAYOUTS: BoundedCache[_Layout] = BoundedCache("layouts from the disk cache", CACHE_SIZE)
@@ -210,7 +213,7 @@ def compile_program(program: Compilable) -> CompiledNLP:
 def _structure_key(program: Compilable) -> str | None:
     """The library key of the structure's fingerprint (None: it has none)."""
     fingerprint = _FINGERPRINTS.get_or_make(
-        program.key()[:3], lambda: structure_fingerprint(program) or ""
+        program.key()[:STRUCTURE_KEY], lambda: structure_fingerprint(program) or ""
     )
     return codegen.structure_key(fingerprint) if fingerprint else None
 
@@ -288,7 +291,7 @@ def _agree(solver: ca.Function, layout: _Layout) -> bool:
 def layout_of(program: Compilable) -> _Layout:
     """The layout of the program's structure: from this process's caches, else from beside
     its library on disk, else from its symbolic program (declared and cached)."""
-    found = _PROGRAMS.get(_program_key(program)) or _LAYOUTS.get(program.key()[:3])
+    found = _PROGRAMS.get(_program_key(program)) or _LAYOUTS.get(program.key()[:STRUCTURE_KEY])
     if found is not None:
         return found
     if program.solver_options.codegen_mode() != "off":
@@ -302,7 +305,7 @@ def layout_of(program: Compilable) -> _Layout:
 def _disk_layout(program: Compilable, lib_key: str) -> _Layout | None:
     """The layout saved beside the library of ``lib_key``, read once per process (then
     cached by structure; a solver-option variant of the structure reads no file)."""
-    k = program.key()[:3]
+    k = program.key()[:STRUCTURE_KEY]
     layout = _LAYOUTS.get(k)
     if layout is None:
         layout = _read_layout(lib_key)
@@ -360,7 +363,7 @@ def _stale(kernels_epoch: int | None) -> bool:
 def _program_key(program: Compilable) -> tuple[Any, ...]:
     """What a symbolic program is cached under: its structure, and whether its collision
     kernels run in machine code (the same arithmetic, :mod:`posturegen.collision.native`)."""
-    return (*program.key()[:3], native_kernels(program))
+    return (*program.key()[:STRUCTURE_KEY], native_kernels(program))
 
 
 def native_kernels(program: Compilable) -> bool:

@@ -19,7 +19,7 @@ import numpy as np
 
 from .._cache import BoundedCache, Ref
 from .buffered import Buffered
-from .compile import CACHE_SIZE, CompiledNLP, is_compiled
+from .compile import CACHE_SIZE, STRUCTURE_KEY, CompiledNLP, is_compiled
 from .problem import Program
 from .sqp.core import Bounds, SQPOptions
 from .sqp.native import sqp
@@ -175,9 +175,6 @@ def run_nlp(
 # loop restarted from there fell back onto the first loop's starts and runs (27, 66, 79 and
 # 100 iterations, again)
 REPLAY_TOL = 1e-6
-# the leading items of Program.key() that are its structure (robot, terms, elastic form); the
-# last is the solver options
-STRUCTURE_KEY = 3
 
 
 @dataclass

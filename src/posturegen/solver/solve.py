@@ -17,7 +17,7 @@ import numpy as np
 import pinocchio as pin
 
 from .._cache import BoundedCache, Ref
-from ..collision.active_set import ActiveSet, placed_blocked
+from ..collision.active_set import ActiveSet, Scan, placed_blocked
 from ..collision.boxes import TIGHTEN_STEP
 from ..collision.mesh_check import mesh_distances
 from ..collision.rows import CollisionTerm
@@ -315,7 +315,7 @@ def _solve_avoiding(
 
 def _rounds(program: Program, prior: list[Run], loop: _Loop, max_rounds: int) -> Result:
     """The loop's rounds and their Result: the last run's, or the posture that stood
-    (:func:`_last_round`); a posture that stood but does not pass the re-check lets the
+    (:func:`_standing_result`); a posture that stood but does not pass the re-check lets the
     rounds go on."""
     loop.rounds(max_rounds)
     if loop.stood is not None:
@@ -395,7 +395,7 @@ class _Loop:
                 return  # no candidate outside the active set is violated
             if self.runs and not budget_left():
                 return  # the call's budget is spent: the re-check says what is violated
-            self.stood = self.standing() if self.runs and self.stand_early else None
+            self.stood = self.standing(scan) if self.runs and self.stand_early else None
             if self.stood is not None:
                 return  # the meshes keep what the proxies do not: the re-check decides
             active.grow(scan)
@@ -407,24 +407,20 @@ class _Loop:
             self.lam = block_multipliers(run, term)
             self.q_check = configuration_from_x(run.program, run.compiled, run.x)
 
-    def standing(self) -> dict[tuple[int, int], tuple[float, float]] | None:
-        """At the posture of the last run, converged: the pairs of links whose proxies are
-        closer than their clearance there, each with that clearance and its meshes' distance
-        [m] (coal on the real meshes), when every such distance keeps the clearance; None
-        otherwise, or when a sphere-box pair or a joint map is violated there. The proxies
-        are spheres fitted within 1 cm outside the meshes: the meshes of a pair whose proxies
-        are too close are often far enough apart, and the next round's run (the pair's rows
-        added, violated) is the longest of a call (a stance's thighs: 29-150 iterations)."""
-        run = self.runs[-1]
-        if run.status not in _IPOPT_OK:
-            return None
-        q = configuration_from_x(self.program, run.compiled, run.x)
-        flagged = self.active.flagged(q, self.margin)
-        if flagged is None:
+    def standing(self, scan: Scan) -> dict[tuple[int, int], tuple[float, float]] | None:
+        """At the last run's posture (``q_check``, converged; ``scan`` made there): the pairs
+        of links whose proxies are closer than their clearance, each with that clearance and
+        its meshes' distance [m] (coal on the real meshes), when every such distance keeps
+        the clearance; None otherwise, or when a sphere-box pair or a joint map is violated
+        there. The proxies are spheres fitted within 1 cm outside the meshes: the meshes of
+        a pair whose proxies are too close are often far enough apart, and the next round's
+        run (the pair's rows added, violated) is the longest of a call (a stance's thighs:
+        29-150 iterations)."""
+        if scan.box_or_map_violated:
             return None
         robot = self.program.robot
-        meshes = mesh_distances(robot.model, robot.collision_model(), q, sorted(flagged))
-        held = {pair: (flagged[pair], meshes[pair]) for pair in flagged}
+        meshes = mesh_distances(robot.model, robot.collision_model(), self.q_check, [*scan.below])
+        held = {pair: (clearance, meshes[pair]) for pair, clearance in scan.below.items()}
         return held if all(mesh >= clearance for clearance, mesh in held.values()) else None
 
     def _run(self, term: CollisionTerm) -> Run:
