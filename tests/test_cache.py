@@ -102,3 +102,19 @@ def test_load_robot_never_renames_a_shared_robot():
     assert (a.name, b.name) == ("first", "second")
     assert load_robot({**spec, "name": "first"}) is a
     assert load_robot(spec).name == "hrp2"
+
+
+def test_the_compiler_found_follows_cc_and_path(monkeypatch, tmp_path):
+    """The compiler search is cached on ($CC, $PATH): another PATH searches again."""
+    from posturegen import _compiler
+
+    fake = tmp_path / "mycc"
+    fake.write_text("#!/bin/sh\nexit 0\n")
+    fake.chmod(0o755)
+    monkeypatch.setenv("PATH", str(tmp_path))
+    monkeypatch.delenv("CC", raising=False)
+    assert _compiler.compiler() is None  # no gcc, no cc on that PATH
+    monkeypatch.setenv("CC", "mycc")
+    assert _compiler.compiler() == str(fake)
+    monkeypatch.setenv("PATH", str(tmp_path / "elsewhere"))
+    assert _compiler.compiler() is None

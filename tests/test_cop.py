@@ -271,3 +271,14 @@ def test_fixed_contact_cop_depth_is_the_intersections(P, Q, shift, point, margin
     if shapely_region.contains(shapely.Point(point)):
         inside = shapely_region.exterior.distance(shapely.Point(point))
         assert got == pytest.approx(margin - inside, abs=1e-9)
+
+
+def test_the_moment_of_a_contacts_forces_is_the_sum_of_their_cross_products():
+    """verify's Σ r_i × f_i (from rᵀf) equals numpy's cross products, one to eight points."""
+    from posturegen.verify import _moment
+
+    rng = np.random.default_rng(20261206)
+    for k in range(1, 9):
+        r = rng.normal(size=(k, 3))
+        f = 100.0 * rng.normal(size=(k, 3))
+        np.testing.assert_allclose(_moment(r, f), np.cross(r, f).sum(axis=0), rtol=0, atol=1e-11)
