@@ -1,6 +1,6 @@
 """A round's posture stands when the real meshes keep the clearance its proxies do not: the
 active-set loop ends there (posturegen.solver.solve._Loop.standing, Scan.below,
-mesh_check.mesh_distances)."""
+mesh_check.mesh_clearances)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 import posturegen.solver.solve as solve_module
 from posturegen.bench.reach import MARGIN, stances_family
 from posturegen.collision.active_set import ActiveSet
-from posturegen.collision.mesh_check import mesh_distances
+from posturegen.collision.mesh_check import mesh_clearances
 from posturegen.solver.solve import solve
 
 # a varied stance whose second round (the thighs' pairs added under their hold) stops
@@ -36,27 +36,12 @@ def stood(stance):
     return solve(stance)
 
 
-def test_mesh_distances_are_coals_over_every_object_of_both_links():
-    """Each pair's distance is the smallest of pinocchio's own distances (coal through
-    computeDistances) between the objects of its two joints, at a seeded random
-    configuration; 0 or less for two links whose meshes intersect; inf for a joint
-    without objects."""
-    problem = next(iter(stances_family(1, 3)))
-    model, geometry = problem.robot.model, problem.robot.collision_model()
-    rng = np.random.default_rng(11)
-    q = pin.randomConfiguration(
-        model, model.lowerPositionLimit.clip(-3, 3), model.upperPositionLimit.clip(-3, 3)
-    )
-    q[7:] = np.clip(
-        q[7:] + 0.1 * rng.standard_normal(model.nq - 7),
-        model.lowerPositionLimit[7:],
-        model.upperPositionLimit[7:],
-    )
-    joints = sorted({int(o.parentJoint) for o in geometry.geometryObjects})
-    pairs = [(a, b) for a in joints for b in joints if a < b][::7]
-    ours = mesh_distances(model, geometry, q, pairs)
+def _exact_distances(model, geometry, q, pairs) -> dict[tuple[int, int], float]:
+    """pinocchio's own distances (coal through computeDistances, on the meshes) between the
+    objects of each pair's two joints, the smallest per pair."""
     gm = geometry.copy()
     gm.removeAllCollisionPairs()
+    joints = {j for pair in pairs for j in pair}
     objects = {
         j: [k for k, o in enumerate(gm.geometryObjects) if o.parentJoint == j] for j in joints
     }
@@ -70,22 +55,50 @@ def test_mesh_distances_are_coals_over_every_object_of_both_links():
     pin.computeDistances(gm, gd)
     theirs: dict[tuple[int, int], float] = {}
     for cp, res in zip(gm.collisionPairs, gd.distanceResults, strict=True):
-        key = tuple(
-            sorted(
-                (
-                    int(gm.geometryObjects[cp.first].parentJoint),
-                    int(gm.geometryObjects[cp.second].parentJoint),
-                )
-            )
-        )
+        objs = (gm.geometryObjects[cp.first], gm.geometryObjects[cp.second])
+        key = tuple(sorted(int(o.parentJoint) for o in objs))
         theirs[key] = min(theirs.get(key, np.inf), res.min_distance)
+    return theirs
+
+
+@pytest.mark.parametrize("seed", [11, 12, 13])
+def test_mesh_clearances_keep_a_clearance_exactly_when_the_meshes_do(seed):
+    """At a seeded random configuration, over every 7th pair of joints with objects and
+    wanted clearances from 0 to 30 cm: each value is at most the meshes' distance (pinocchio's
+    computeDistances), it is at least the clearance exactly when their distance is, and it is
+    their distance wherever it is below the clearance; a joint against itself is 0 or less,
+    a joint without objects inf."""
+    problem = next(iter(stances_family(1, 3)))
+    model, geometry = problem.robot.model, problem.robot.collision_model()
+    rng = np.random.default_rng(seed)
+    q = pin.randomConfiguration(
+        model, model.lowerPositionLimit.clip(-3, 3), model.upperPositionLimit.clip(-3, 3)
+    )
+    q[7:] = np.clip(
+        q[7:] + 0.1 * rng.standard_normal(model.nq - 7),
+        model.lowerPositionLimit[7:],
+        model.upperPositionLimit[7:],
+    )
+    joints = sorted({int(o.parentJoint) for o in geometry.geometryObjects})
+    pairs = [(a, b) for a in joints for b in joints if a < b][seed % 7 :: 7]
+    wanted = {
+        pair: float(c) for pair, c in zip(pairs, rng.uniform(0.0, 0.3, len(pairs)), strict=True)
+    }
+    ours = mesh_clearances(model, geometry, q, wanted)
+    exact = _exact_distances(model, geometry, q, pairs)
     assert len(pairs) > 20
-    for pair in pairs:
-        assert ours[pair] == pytest.approx(theirs[pair], abs=1e-9), pair
+    kept = 0
+    for pair, clearance in wanted.items():
+        assert ours[pair] <= exact[pair] + 1e-12, pair
+        assert (ours[pair] >= clearance) == (exact[pair] >= clearance), pair
+        if exact[pair] < clearance:
+            assert ours[pair] == pytest.approx(exact[pair], abs=1e-9), pair
+        kept += exact[pair] >= clearance
+    assert 0 < kept < len(pairs)  # both cases met
     parent = int(geometry.geometryObjects[0].parentJoint)
-    assert mesh_distances(model, geometry, q, [(parent, parent)])[(parent, parent)] <= 0.0
-    assert 0 not in objects  # the universe: no object of the robot's
-    assert mesh_distances(model, geometry, q, [(0, parent)])[(0, parent)] == np.inf
+    assert mesh_clearances(model, geometry, q, {(parent, parent): 0.0})[(parent, parent)] <= 0.0
+    assert 0 not in {int(o.parentJoint) for o in geometry.geometryObjects}  # the universe
+    assert mesh_clearances(model, geometry, q, {(0, parent): 0.0})[(0, parent)] == np.inf
 
 
 def test_a_scan_names_the_pairs_below_their_threshold_held_or_not(stance, stood):
@@ -119,7 +132,7 @@ def test_a_round_whose_meshes_keep_the_clearance_its_proxies_do_not_ends_the_rou
     assert note in stood.posture["notes"]
     flagged = ActiveSet.of(stance).scan(stood.q, MARGIN, near=False).below
     robot = stance.robot
-    meshes = mesh_distances(robot.model, robot.collision_model(), stood.q, sorted(flagged))
+    meshes = _exact_distances(robot.model, robot.collision_model(), stood.q, sorted(flagged))
     assert flagged and all(meshes[p] >= c for p, c in flagged.items())
     assert stood.verification.ok
 
@@ -129,11 +142,10 @@ def test_a_posture_whose_meshes_do_not_keep_the_clearance_does_not_stand(stance,
     not taken: the second round runs (29 iterations, its cold retry 29 more) and the call
     carries no such note."""
 
-    def short(model, geometry, q, pairs):
-        flagged = ActiveSet.of(stance).scan(q, MARGIN, near=False).below
-        return {p: flagged[p] - 1e-4 for p in pairs}
+    def short(model, geometry, q, wanted):
+        return {p: clearance - 1e-4 for p, clearance in wanted.items()}
 
-    monkeypatch.setattr(solve_module, "mesh_distances", short)
+    monkeypatch.setattr(solve_module, "mesh_clearances", short)
     solve_module._LEARNED.clear()
     result = solve(stance)
     assert not _note(result)

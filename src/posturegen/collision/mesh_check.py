@@ -116,36 +116,71 @@ def _pair_depths(
     return sorted(out, reverse=True)
 
 
-def mesh_distances(
+# [m] taken off a distance between convex hulls (coal's GJK stops within about 1e-6 m of
+# it: 1.07e-6 m above the meshes' own at worst over Talos' objects) so that it stays below
+# the meshes' distance
+HULL_SLACK = 1e-5
+
+
+def mesh_clearances(
     model: pin.Model,
     geometry: pin.GeometryModel,
     q: np.ndarray,
-    joint_pairs: list[tuple[int, int]],
+    wanted: dict[tuple[int, int], float],
 ) -> dict[tuple[int, int], float]:
-    """[m] the smallest distance between the meshes of each pair of joints (a, b) at posture
-    q (nq,): coal's, over every collision object of a against every one of b (0 or less
-    when they intersect; inf when either has none)."""
+    """[m] for each pair of joints (a, b) of ``wanted``, a lower bound of the distance between
+    their meshes at posture q (nq,), at least the pair's wanted clearance [m] exactly when
+    the meshes keep it (inf when either joint has no object). Each pair of their objects
+    bounds it by the cheapest of: their bounding spheres' gap, their convex hulls' distance
+    (coal's GJK, less HULL_SLACK), their meshes' distance (coal on the triangles), taking
+    the next only while the last is below the clearance; the meshes' own distance, 0.4 ms
+    an object pair (a gripper's ten objects against a thigh: 3.8 ms), is thus measured only
+    where the hulls, 20x faster, come closer than the clearance."""
     data = scratch_data(model)
     pin.forwardKinematics(model, data, q)
-    joints = {j for pair in joint_pairs for j in pair}
-    placed: dict[int, list[tuple[Any, coal.Transform3s]]] = {}
-    for obj in geometry.geometryObjects:
+    joints = {j for pair in wanted for j in pair}
+    centres, radii = _bounding_spheres(geometry)
+    placed: dict[int, list[tuple[pin.GeometryObject, coal.Transform3s, np.ndarray, float]]] = {}
+    for k, obj in enumerate(geometry.geometryObjects):
         if int(obj.parentJoint) not in joints:
             continue
         M = data.oMi[obj.parentJoint] * obj.placement
-        transform = coal.Transform3s(M.rotation, M.translation)
-        placed.setdefault(int(obj.parentJoint), []).append((obj.geometry, transform))
-    request, out = coal.DistanceRequest(), {}
-    for a, b in joint_pairs:
+        centre = data.oMi[obj.parentJoint].act(centres[k])  # (3,) world [m]
+        placed.setdefault(int(obj.parentJoint), []).append(
+            (obj, coal.Transform3s(M.rotation, M.translation), centre, float(radii[k]))
+        )
+    out = {}
+    for (a, b), clearance in wanted.items():
         out[(a, b)] = min(
             (
-                coal.distance(ga, Ta, gb, Tb, request, coal.DistanceResult())
-                for ga, Ta in placed.get(a, [])
-                for gb, Tb in placed.get(b, [])
+                _object_bound(first, second, clearance)
+                for first in placed.get(a, [])
+                for second in placed.get(b, [])
             ),
             default=np.inf,
         )
     return out
+
+
+def _object_bound(first: tuple[Any, ...], second: tuple[Any, ...], clearance: float) -> float:
+    """[m] a lower bound of two placed objects' distance (object, transform, world centre,
+    radius each): their spheres', else their hulls', else their meshes' own, the first that
+    reaches ``clearance`` [m] (the meshes' when none does)."""
+    oa, Ta, ca, ra = first
+    ob, Tb, cb, rb = second
+    bound = float(np.linalg.norm(ca - cb)) - ra - rb
+    if bound >= clearance:
+        return bound
+    hulls = coal.distance(
+        convex_shape(oa), Ta, convex_shape(ob), Tb, coal.DistanceRequest(), coal.DistanceResult()
+    )
+    if hulls - HULL_SLACK >= clearance:
+        return hulls - HULL_SLACK
+    return float(
+        coal.distance(
+            oa.geometry, Ta, ob.geometry, Tb, coal.DistanceRequest(), coal.DistanceResult()
+        )
+    )
 
 
 def _user_note(

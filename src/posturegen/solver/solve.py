@@ -19,7 +19,7 @@ import pinocchio as pin
 from .._cache import BoundedCache, Ref
 from ..collision.active_set import ActiveSet, Scan, placed_blocked
 from ..collision.boxes import TIGHTEN_STEP
-from ..collision.mesh_check import mesh_distances
+from ..collision.mesh_check import mesh_clearances
 from ..collision.rows import CollisionTerm
 from ..collision.separation import separated_start
 from ..collision.slots import Capacity
@@ -341,7 +341,7 @@ def _standing_result(
         return None
     names = program.robot.model.names
     note = "the meshes keep the clearance their proxies do not: " + ", ".join(
-        f"{names[a]}/{names[b]} {1e3 * mesh:.1f} mm apart >= {1e3 * clearance:.1f} mm"
+        f"{names[a]}/{names[b]} at least {1e3 * mesh:.1f} mm apart >= {1e3 * clearance:.1f} mm"
         for (a, b), (clearance, mesh) in sorted(standing.items())
     )
     report = result.verification
@@ -410,8 +410,9 @@ class _Loop:
     def standing(self, scan: Scan) -> dict[tuple[int, int], tuple[float, float]] | None:
         """At the last run's posture (``q_check``, converged; ``scan`` made there): the pairs
         of links whose proxies are closer than their clearance, each with that clearance and
-        its meshes' distance [m] (coal on the real meshes), when every such distance keeps
-        the clearance; None otherwise, or when a sphere-box pair or a joint map is violated
+        a lower bound of its meshes' distance [m] (:func:`mesh_clearances`: coal on the real
+        meshes where their hulls come closer), when every such bound keeps the clearance;
+        None otherwise, or when a sphere-box pair or a joint map is violated
         there. The proxies are spheres fitted within 1 cm outside the meshes: the meshes of
         a pair whose proxies are too close are often far enough apart, and the next round's
         run (the pair's rows added, violated) is the longest of a call (a stance's thighs:
@@ -419,7 +420,7 @@ class _Loop:
         if scan.box_or_map_violated:
             return None
         robot = self.program.robot
-        meshes = mesh_distances(robot.model, robot.collision_model(), self.q_check, [*scan.below])
+        meshes = mesh_clearances(robot.model, robot.collision_model(), self.q_check, scan.below)
         held = {pair: (clearance, meshes[pair]) for pair, clearance in scan.below.items()}
         return held if all(mesh >= clearance for clearance, mesh in held.values()) else None
 
