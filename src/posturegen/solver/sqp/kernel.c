@@ -33,6 +33,7 @@ typedef struct {
     long max_iter, stall_iterations, hessian_every, flat_iterations;
     double max_time_s, tol_primal, tol_dual, radius0, radius_min, penalty0;
     double eta, shrink, radius_max, penalty_max, delta, curvature_max, linear_tol, flat_change;
+    double penalty_over;
     double *augment;
     long n_augment;
     ask_t ask;
@@ -565,6 +566,9 @@ long sqp_run(Sqp *s) {
         it = trial;
         memcpy(s->lam_g, s->lam_r, m * sizeof(double));
         own_bound_multipliers(s, it);
+        /* ν down to PENALTY_OVER_MULTIPLIERS × ‖λ‖∞, not below ν0 (fmin ignores a NaN as
+           Python's min does) */
+        penalty = fmax(s->penalty0, fmin(penalty, s->penalty_over * max_abs(s->lam_g, m)));
         kept += 1;
         if (kept < s->hessian_every) relinearized(s, previous, it);
         else have_model = 0;

@@ -82,6 +82,7 @@ class _Sqp(ctypes.Structure):
             ctypes.c_double,
             "eta shrink radius_max penalty_max delta curvature_max linear_tol flat_change",
         ),
+        ("penalty_over", ctypes.c_double),
         ("augment", _D),
         ("n_augment", ctypes.c_long),
         ("ask", _ASK),
@@ -252,6 +253,7 @@ class Kernel:
         s.flat_iterations, s.flat_change = core.FLAT_ITERATIONS, core.FLAT_CHANGE
         s.eta, s.shrink, s.radius_max = core.ETA, core.SHRINK, core.RADIUS_MAX
         s.penalty_max, s.linear_tol = core.PENALTY_MAX, core.LINEAR_TOL
+        s.penalty_over = core.PENALTY_OVER_MULTIPLIERS
         s.delta, s.curvature_max = DELTA, CURVATURE_MAX
         self.a["augment"][:] = AUGMENT
         s.n_augment = len(AUGMENT)
