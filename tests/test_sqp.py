@@ -781,3 +781,27 @@ def test_ipopts_own_options_do_not_make_an_sqp_run_new(free_problems):
     assert again.replayed and again.iterations == 0 and np.array_equal(again.x, first.x)
     for run in (timed, other_qp):
         assert not run.replayed and run.iterations > 0
+
+
+def test_a_penalty_steered_up_far_from_feasibility_comes_down_at_a_feasible_posture(monkeypatch):
+    """A varied stance (seeds 1, #115) whose second round's penalty was steered to 5.6e4 while
+    its rows were 2 cm from holding: at the feasible postures after it, that ν weighed each
+    step's 1e-8 curvature violations against its cost and held the region at 7.6e-4 for 120
+    iterations (the SQP spent its 150, IPOPT took 97 more). With ν brought down to
+    PENALTY_OVER_MULTIPLIERS × ‖λ‖∞ after each accepted step the SQP verifies it alone, in
+    fewer than 100 iterations; kept where the steering left it, it does not."""
+    from posturegen.bench.reach import stances_family
+    from posturegen.solver import solve as solve_module
+
+    stance = list(stances_family(117, 1))[116]
+    stance = dataclasses.replace(
+        stance, solver_options=dataclasses.replace(stance.solver_options, method="sqp")
+    )
+    solve_module._LEARNED.clear()
+    result = solve(stance)
+    assert result.success, result.message
+    assert result.iterations_by_method == {"sqp": result.iterations} and result.iterations < 100
+    monkeypatch.setattr(core, "PENALTY_OVER_MULTIPLIERS", np.inf)  # both loops read it
+    solve_module._LEARNED.clear()
+    kept = solve(stance)
+    assert not kept.success or kept.iterations >= 150
