@@ -204,8 +204,7 @@ def sqp(
             continue
         previous, (it, ratio) = it, step
         lam_g, lam_x = sol.lam_rows, _own_bound_multipliers(sol, qp, it, bounds)
-        penalty = max(options.penalty, min(penalty, PENALTY_OVER_MULTIPLIERS * max_abs(lam_g)))
-        kept += 1
+        penalty, kept = _lowered(penalty, lam_g, options), kept + 1
         scaled = relinearized(scaled, previous, it, lam_g, bounds) if kept < HESSIAN_EVERY else None
         if flat.settled(it, options) and not _converged(it, lam_g, lam_x, bounds, options):
             run.status = ACCEPTABLE
@@ -215,6 +214,12 @@ def sqp(
     else:
         run.status = SUCCEEDED if _converged(it, lam_g, lam_x, bounds, options) else run.status
     return _finished(run, it, lam_g, lam_x, t0)
+
+
+def _lowered(penalty: float, lam_g: np.ndarray, options: SQPOptions) -> float:
+    """ν after an accepted step with row multipliers ``lam_g`` (m,): at most
+    PENALTY_OVER_MULTIPLIERS × ‖λ‖∞, at least ``options.penalty``."""
+    return max(options.penalty, min(penalty, PENALTY_OVER_MULTIPLIERS * max_abs(lam_g)))
 
 
 def _shrunk(radius: float, d_size: float, kept: int, options: SQPOptions) -> tuple[float, bool]:
