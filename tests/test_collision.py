@@ -683,7 +683,7 @@ def test_row_box_distances_below_a_threshold_are_exact_and_the_others_read_inf(t
 
     pm = proxy_model(talos)
     model, pdata = talos.model, talos.model.createData()
-    np.random.seed(5)  # pinocchio's randomConfiguration draws from numpy's global state
+    pin.seed(5)  # pinocchio's randomConfiguration draws from its own generator
     boxes = [
         EnvBox(
             "a",

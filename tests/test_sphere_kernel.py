@@ -31,7 +31,7 @@ def _postures(robot, seed: int, count: int):
     model = robot.model
     lower = np.maximum(model.lowerPositionLimit, -1.0)
     upper = np.minimum(model.upperPositionLimit, 1.0)
-    np.random.seed(seed)  # pinocchio's randomConfiguration draws from numpy's global state
+    pin.seed(seed)  # pinocchio's randomConfiguration draws from its own generator
     return [pin.randomConfiguration(model, lower, upper) for _ in range(count)]
 
 
