@@ -156,11 +156,11 @@ class _Program(_Layout):
 
 
 CACHE_SIZE = 32
-# compiled solvers by structure and solver options; symbolic programs, layouts read from the
-# disk cache and fingerprints ("": none) by structure
 # the leading items of Program.key() that are its structure (robot, terms, elastic form); the
 # last is the solver options, each variant of them a solver of its own on the same functions
 STRUCTURE_KEY = 3
+# compiled solvers by structure and solver options; symbolic programs, layouts read from the
+# disk cache and fingerprints ("": none) by structure
 _CACHE: BoundedCache[CompiledNLP] = BoundedCache("compiled solvers", CACHE_SIZE)
 _PROGRAMS: BoundedCache[_Program] = BoundedCache("symbolic programs", CACHE_SIZE)
 _LAYOUTS: BoundedCache[_Layout] = BoundedCache("layouts from the disk cache", CACHE_SIZE)
